@@ -1,0 +1,36 @@
+//! # raypack
+//!
+//! A data-oriented SIMD ray tracer with a CS184-style path tracer on top.
+//!
+//! Layers, each depending only on the ones before it:
+//! [`math`] → [`ray`] / [`geometry`] → [`bvh`] → [`scene`] → [`render`] → [`io`].
+//!
+//! ```
+//! use raypack::{BuildOptions, Material, Ray, SceneBuilder, Vec3};
+//!
+//! let mut b = SceneBuilder::new();
+//! let mat = b.add_material(Material::diffuse(Vec3::splat(0.7)));
+//! b.add_mesh(&[Vec3::ZERO, Vec3::X, Vec3::Y], &[[0, 1, 2]], mat)?;
+//! b.add_sphere(Vec3::new(0.0, 0.0, -5.0), 1.0, mat)?;
+//! let (scene, report) = b.commit(&BuildOptions::default());
+//! assert_eq!(report.dropped(), 0);
+//!
+//! let hit = scene.intersect1(&Ray::new(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z));
+//! assert_eq!((hit.prim, hit.t), (0, 1.0)); // the triangle, one unit away
+//! assert!(scene.occluded1(&Ray::new(Vec3::new(0.0, 0.0, -1.0), -Vec3::Z))); // the sphere
+//! # Ok::<(), raypack::SceneError>(())
+//! ```
+#![deny(missing_docs)]
+
+pub mod bvh;
+pub mod geometry;
+pub mod io;
+pub mod math;
+pub mod ray;
+pub mod render;
+pub mod scene;
+
+pub use bvh::{BuildOptions, BuildQuality, BvhStats, SplitMethod};
+pub use math::{Aabb, Mat3, Mat4, Vec3};
+pub use ray::{Hit, Ray};
+pub use scene::{Bsdf, Camera, CommitReport, Light, Material, MaterialId, Scene, SceneBuilder, SceneError, SurfaceHit};

@@ -1,0 +1,1 @@
+//! The renderer: films, integrators and image output.

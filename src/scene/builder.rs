@@ -1,0 +1,312 @@
+//! Gathers geometry, materials, lights and a camera, then commits them into a [`Scene`].
+//!
+//! `add_*` calls check the buffers they are given (index ranges, material ids) and return
+//! [`SceneError`] on malformed input. [`SceneBuilder::commit`] never fails: it drops
+//! primitives that cannot be traced (NaN/Inf or absurdly large coordinates, zero-area
+//! triangles, non-positive radii) and counts them in the [`CommitReport`], as Embree does.
+//! An empty scene is legal: every ray misses.
+
+use crate::bvh::{BuildOptions, BuildPrim, build_bvh2};
+use crate::math::{Aabb, Vec3};
+use crate::scene::{Camera, Light, Material, MaterialId, Scene, SpheresSoa, TrianglesSoa};
+
+/// Coordinates beyond this magnitude are rejected at commit (Embree's limit, `FLT_LARGE`).
+pub const MAX_COORDINATE: f32 = 1.844e18;
+
+/// Malformed input to a [`SceneBuilder`] call.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum SceneError {
+    /// A triangle refers to a vertex that does not exist.
+    #[error("triangle {triangle} refers to vertex {index}, but the mesh has {vertices} vertices")]
+    IndexOutOfRange {
+        /// Triangle number within the mesh.
+        triangle: usize,
+        /// The offending index.
+        index: u32,
+        /// Number of vertices given.
+        vertices: usize,
+    },
+    /// A material id that was never added.
+    #[error("material {0} does not exist")]
+    UnknownMaterial(MaterialId),
+    /// Normals were given but not one per vertex.
+    #[error("{normals} normals given for {vertices} vertices")]
+    NormalCount {
+        /// Normals given.
+        normals: usize,
+        /// Vertices given.
+        vertices: usize,
+    },
+    /// The scene would exceed `u32` primitive ids.
+    #[error("too many primitives (more than 2^32 - 2)")]
+    TooLarge,
+}
+
+/// What [`SceneBuilder::commit`] kept and dropped.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct CommitReport {
+    /// Triangles kept.
+    pub triangles: usize,
+    /// Spheres kept.
+    pub spheres: usize,
+    /// Triangles dropped for NaN/Inf or out-of-range coordinates.
+    pub dropped_non_finite: usize,
+    /// Triangles dropped for having zero area.
+    pub dropped_degenerate: usize,
+    /// Spheres dropped (non-finite centre or radius, radius <= 0).
+    pub dropped_spheres: usize,
+}
+
+impl CommitReport {
+    /// Total primitives dropped.
+    pub fn dropped(&self) -> usize {
+        self.dropped_non_finite + self.dropped_degenerate + self.dropped_spheres
+    }
+}
+
+impl std::fmt::Display for CommitReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} triangles, {} spheres", self.triangles, self.spheres)?;
+        if self.dropped() > 0 {
+            write!(
+                f,
+                " (dropped {} triangles with NaN/Inf/huge coordinates, {} zero-area triangles, {} invalid spheres)",
+                self.dropped_non_finite, self.dropped_degenerate, self.dropped_spheres
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// Collects a scene; see the module docs.
+#[derive(Clone, Debug, Default)]
+pub struct SceneBuilder {
+    triangles: TrianglesSoa,
+    has_normals: bool,
+    spheres: SpheresSoa,
+    materials: Vec<Material>,
+    lights: Vec<Light>,
+    camera: Option<Camera>,
+}
+
+impl SceneBuilder {
+    /// An empty builder.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Adds a material and returns its id.
+    pub fn add_material(&mut self, m: Material) -> MaterialId {
+        self.materials.push(m);
+        (self.materials.len() - 1) as MaterialId
+    }
+
+    /// The materials added so far.
+    pub fn materials(&self) -> &[Material] {
+        &self.materials
+    }
+
+    /// Adds a triangle mesh (positions already in world space).
+    pub fn add_mesh(&mut self, positions: &[Vec3], indices: &[[u32; 3]], material: MaterialId) -> Result<(), SceneError> {
+        self.add_mesh_with_normals(positions, None, indices, material)
+    }
+
+    /// Adds a triangle mesh with optional per-vertex shading normals.
+    pub fn add_mesh_with_normals(
+        &mut self,
+        positions: &[Vec3],
+        normals: Option<&[Vec3]>,
+        indices: &[[u32; 3]],
+        material: MaterialId,
+    ) -> Result<(), SceneError> {
+        self.check_material(material)?;
+        if let Some(n) = normals {
+            if n.len() != positions.len() {
+                return Err(SceneError::NormalCount { normals: n.len(), vertices: positions.len() });
+            }
+        }
+        for (t, tri) in indices.iter().enumerate() {
+            if let Some(&index) = tri.iter().find(|&&i| i as usize >= positions.len()) {
+                return Err(SceneError::IndexOutOfRange { triangle: t, index, vertices: positions.len() });
+            }
+        }
+        let base = self.triangles.positions.len();
+        if base + positions.len() > u32::MAX as usize || self.triangles.len() + indices.len() >= u32::MAX as usize - 1 {
+            return Err(SceneError::TooLarge);
+        }
+        let t = &mut self.triangles;
+        t.positions.extend_from_slice(positions);
+        match normals {
+            Some(n) => {
+                if !self.has_normals {
+                    t.normals.resize(base, Vec3::ZERO);
+                    self.has_normals = true;
+                }
+                t.normals.extend_from_slice(n);
+            }
+            None if self.has_normals => t.normals.resize(base + positions.len(), Vec3::ZERO),
+            None => {}
+        }
+        let b = base as u32;
+        t.indices.extend(indices.iter().map(|&[x, y, z]| [x + b, y + b, z + b]));
+        t.material.resize(t.indices.len(), material);
+        Ok(())
+    }
+
+    /// Adds a sphere.
+    pub fn add_sphere(&mut self, center: Vec3, radius: f32, material: MaterialId) -> Result<(), SceneError> {
+        self.check_material(material)?;
+        self.spheres.center.push(center);
+        self.spheres.radius.push(radius);
+        self.spheres.material.push(material);
+        Ok(())
+    }
+
+    /// Adds a light.
+    pub fn add_light(&mut self, light: Light) {
+        self.lights.push(light);
+    }
+
+    /// The lights added so far.
+    pub fn lights(&self) -> &[Light] {
+        &self.lights
+    }
+
+    /// Sets the camera.
+    pub fn set_camera(&mut self, camera: Camera) {
+        self.camera = Some(camera);
+    }
+
+    /// The camera set so far.
+    pub fn camera(&self) -> Option<&Camera> {
+        self.camera.as_ref()
+    }
+
+    /// Triangles added so far.
+    pub fn num_triangles(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// Spheres added so far.
+    pub fn num_spheres(&self) -> usize {
+        self.spheres.len()
+    }
+
+    /// Bounds of everything added so far (before dropping invalid primitives).
+    pub fn bounds(&self) -> Aabb {
+        let mut b = Aabb::EMPTY;
+        for p in &self.triangles.positions {
+            if p.is_finite() {
+                b.grow(*p);
+            }
+        }
+        for i in 0..self.spheres.len() {
+            let sb = self.spheres.bounds(i);
+            if sb.is_valid() && sb.min.is_finite() && sb.max.is_finite() {
+                b = b.union(&sb);
+            }
+        }
+        b
+    }
+
+    fn check_material(&self, m: MaterialId) -> Result<(), SceneError> {
+        if (m as usize) < self.materials.len() { Ok(()) } else { Err(SceneError::UnknownMaterial(m)) }
+    }
+
+    /// Drops untraceable primitives, builds the acceleration structure and returns the
+    /// scene with a report of what was kept.
+    pub fn commit(self, opts: &BuildOptions) -> (Scene, CommitReport) {
+        let mut report = CommitReport::default();
+        let SceneBuilder { mut triangles, spheres: in_spheres, mut materials, lights, camera, .. } = self;
+        if materials.is_empty() {
+            materials.push(Material::default());
+        }
+
+        let ok = |p: Vec3| p.is_finite() && p.abs().max_element() <= MAX_COORDINATE;
+        let mut keep = 0usize;
+        for i in 0..triangles.indices.len() {
+            let [a, b, c] = triangles.vertices(i);
+            if !(ok(a) && ok(b) && ok(c)) {
+                report.dropped_non_finite += 1;
+                continue;
+            }
+            // Zero area in floating point: the cross product vanishes (or underflows).
+            if (b - a).cross(c - a) == Vec3::ZERO {
+                report.dropped_degenerate += 1;
+                continue;
+            }
+            triangles.indices[keep] = triangles.indices[i];
+            triangles.material[keep] = triangles.material[i];
+            keep += 1;
+        }
+        triangles.indices.truncate(keep);
+        triangles.material.truncate(keep);
+
+        let mut spheres = SpheresSoa::default();
+        for i in 0..in_spheres.len() {
+            let (c, r) = (in_spheres.center[i], in_spheres.radius[i]);
+            if ok(c) && r.is_finite() && r > 0.0 && r <= MAX_COORDINATE && ok(c + Vec3::splat(r)) && ok(c - Vec3::splat(r)) {
+                spheres.center.push(c);
+                spheres.radius.push(r);
+                spheres.material.push(in_spheres.material[i]);
+            } else {
+                report.dropped_spheres += 1;
+            }
+        }
+        report.triangles = triangles.len();
+        report.spheres = spheres.len();
+
+        let nt = triangles.len();
+        let mut prims: Vec<BuildPrim> = (0..nt)
+            .map(|i| BuildPrim { bounds: triangles.bounds(i), id: i as u32 })
+            .chain((0..spheres.len()).map(|i| BuildPrim { bounds: spheres.bounds(i), id: (nt + i) as u32 }))
+            .collect();
+        let bounds = prims.iter().fold(Aabb::EMPTY, |b, p| b.union(&p.bounds));
+        let bvh2 = build_bvh2(&mut prims, opts);
+        let scene = Scene { triangles, spheres, materials, lights, camera, bounds, bvh2 };
+        (scene, report)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rejects_bad_indices_and_materials() {
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::default());
+        let p = [Vec3::ZERO, Vec3::X, Vec3::Y];
+        assert_eq!(
+            b.add_mesh(&p, &[[0, 1, 3]], m),
+            Err(SceneError::IndexOutOfRange { triangle: 0, index: 3, vertices: 3 })
+        );
+        assert_eq!(b.add_mesh(&p, &[[0, 1, 2]], 7), Err(SceneError::UnknownMaterial(7)));
+        assert!(b.add_mesh(&p, &[[0, 1, 2]], m).is_ok());
+    }
+
+    #[test]
+    fn commit_drops_and_counts_bad_primitives() {
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::default());
+        let p = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(f32::NAN, 0.0, 0.0), Vec3::new(2.0, 0.0, 0.0)];
+        b.add_mesh(&p, &[[0, 1, 2], [0, 1, 3], [0, 1, 4], [2, 2, 1]], m).unwrap();
+        b.add_sphere(Vec3::ZERO, -1.0, m).unwrap();
+        b.add_sphere(Vec3::ZERO, 1.0, m).unwrap();
+        let (scene, report) = b.commit(&BuildOptions::default());
+        assert_eq!(report.triangles, 1);
+        assert_eq!(report.dropped_non_finite, 1);
+        assert_eq!(report.dropped_degenerate, 2);
+        assert_eq!(report.dropped_spheres, 1);
+        assert_eq!(scene.num_prims(), 2);
+    }
+
+    #[test]
+    fn empty_scene_misses_everything() {
+        let (scene, report) = SceneBuilder::new().commit(&BuildOptions::default());
+        assert_eq!(report.triangles + report.spheres, 0);
+        let r = crate::Ray::new(Vec3::ZERO, Vec3::X);
+        assert!(!scene.intersect1(&r).is_hit());
+        assert!(!scene.occluded1(&r));
+    }
+}

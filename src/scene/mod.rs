@@ -1,0 +1,14 @@
+//! The scene: a structure-of-arrays store of geometry, materials, lights and camera, plus
+//! the acceleration structure built over it at commit.
+
+pub mod builder;
+pub mod camera;
+pub mod light;
+pub mod material;
+pub mod store;
+
+pub use builder::{CommitReport, SceneBuilder, SceneError};
+pub use camera::Camera;
+pub use light::Light;
+pub use material::{Bsdf, Material, MaterialId};
+pub use store::{Scene, SpheresSoa, SurfaceHit, TrianglesSoa};

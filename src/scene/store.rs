@@ -1,0 +1,254 @@
+//! The committed scene: flat arrays, one per attribute, and the BVH over them.
+//!
+//! Primitive ids are scene-wide: triangles `0 .. num_triangles()`, then spheres.
+
+use crate::bvh::{Bvh2, BvhStats};
+use crate::geometry::{intersect_sphere, intersect_triangle, sphere::sphere_uv};
+use crate::math::{Aabb, Vec3};
+use crate::ray::{Hit, Ray};
+use crate::scene::{Camera, Light, Material};
+
+/// Triangle meshes, all merged, as structure of arrays.
+#[derive(Clone, Debug, Default)]
+pub struct TrianglesSoa {
+    /// Vertex positions.
+    pub positions: Vec<Vec3>,
+    /// Per-vertex shading normals, parallel to `positions`, or empty when no mesh had any.
+    /// A zero normal means "use the geometric normal".
+    pub normals: Vec<Vec3>,
+    /// Vertex indices of each triangle (all `< positions.len()`).
+    pub indices: Vec<[u32; 3]>,
+    /// Material id of each triangle.
+    pub material: Vec<u32>,
+}
+
+impl TrianglesSoa {
+    /// Number of triangles.
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.indices.len()
+    }
+
+    /// True when there are no triangles.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.indices.is_empty()
+    }
+
+    /// The three corners of triangle `i`.
+    #[inline]
+    pub fn vertices(&self, i: usize) -> [Vec3; 3] {
+        let [a, b, c] = self.indices[i];
+        [self.positions[a as usize], self.positions[b as usize], self.positions[c as usize]]
+    }
+
+    /// Bounds of triangle `i`.
+    #[inline]
+    pub fn bounds(&self, i: usize) -> Aabb {
+        let [a, b, c] = self.vertices(i);
+        let mut bb = Aabb::from_point(a);
+        bb.grow(b);
+        bb.grow(c);
+        bb
+    }
+}
+
+/// Spheres as structure of arrays.
+#[derive(Clone, Debug, Default)]
+pub struct SpheresSoa {
+    /// Centres.
+    pub center: Vec<Vec3>,
+    /// Radii (positive).
+    pub radius: Vec<f32>,
+    /// Material id of each sphere.
+    pub material: Vec<u32>,
+}
+
+impl SpheresSoa {
+    /// Number of spheres.
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.center.len()
+    }
+
+    /// True when there are no spheres.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.center.is_empty()
+    }
+
+    /// Bounds of sphere `i`.
+    #[inline]
+    pub fn bounds(&self, i: usize) -> Aabb {
+        let r = Vec3::splat(self.radius[i]);
+        Aabb { min: self.center[i] - r, max: self.center[i] + r }
+    }
+}
+
+/// Local geometry at a hit point, for shading.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceHit {
+    /// World-space position.
+    pub position: Vec3,
+    /// Unit geometric normal (triangles: `(v1-v0) x (v2-v0)` normalised; spheres: outward).
+    pub geometric_normal: Vec3,
+    /// Unit shading normal (interpolated vertex normals when present), on the same side as
+    /// the geometric normal.
+    pub shading_normal: Vec3,
+    /// Material id.
+    pub material: u32,
+}
+
+/// A committed, immutable scene that answers ray queries. Build one with
+/// [`crate::SceneBuilder`].
+#[derive(Debug)]
+pub struct Scene {
+    /// Triangle meshes.
+    pub triangles: TrianglesSoa,
+    /// Spheres.
+    pub spheres: SpheresSoa,
+    /// Materials, indexed by material id.
+    pub materials: Vec<Material>,
+    /// Light sources (emissive surfaces are found from materials).
+    pub lights: Vec<Light>,
+    /// The camera from the scene file, if any.
+    pub camera: Option<Camera>,
+    pub(crate) bounds: Aabb,
+    pub(crate) bvh2: Bvh2,
+}
+
+impl Scene {
+    /// Number of triangles.
+    pub fn num_triangles(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// Number of spheres.
+    pub fn num_spheres(&self) -> usize {
+        self.spheres.len()
+    }
+
+    /// Number of primitives (triangles + spheres).
+    pub fn num_prims(&self) -> usize {
+        self.triangles.len() + self.spheres.len()
+    }
+
+    /// Bounds of all geometry ([`Aabb::EMPTY`] for an empty scene).
+    pub fn bounds(&self) -> Aabb {
+        self.bounds
+    }
+
+    /// The camera from the file, or one framing the geometry.
+    pub fn camera_or_framing(&self, aspect: f32) -> Camera {
+        match self.camera {
+            Some(mut c) => {
+                c.set_aspect(aspect);
+                c
+            }
+            None => Camera::framing(&self.bounds, aspect),
+        }
+    }
+
+    /// The binary BVH (the scalar reference structure).
+    pub fn bvh2(&self) -> &Bvh2 {
+        &self.bvh2
+    }
+
+    /// Quality figures of the reference BVH.
+    pub fn bvh_stats(&self) -> BvhStats {
+        BvhStats::of_bvh2(&self.bvh2)
+    }
+
+    /// Bounds of primitive `prim`.
+    pub fn prim_bounds(&self, prim: u32) -> Aabb {
+        let nt = self.triangles.len();
+        let p = prim as usize;
+        if p < nt { self.triangles.bounds(p) } else { self.spheres.bounds(p - nt) }
+    }
+
+    /// Intersects one primitive over `(ray.tnear, tfar]`: `(t, u, v)` or `None`.
+    #[inline]
+    pub fn intersect_prim(&self, prim: u32, ray: &Ray, tfar: f32) -> Option<(f32, f32, f32)> {
+        let nt = self.triangles.len();
+        let p = prim as usize;
+        if p < nt {
+            let [a, b, c] = self.triangles.vertices(p);
+            intersect_triangle(ray.origin, ray.dir, ray.tnear, tfar, a, b, c)
+        } else {
+            let s = p - nt;
+            let center = self.spheres.center[s];
+            let t = intersect_sphere(ray.origin, ray.dir, ray.tnear, tfar, center, self.spheres.radius[s])?;
+            let (u, v) = sphere_uv((ray.at(t) - center).normalize());
+            Some((t, u, v))
+        }
+    }
+
+    /// Closest hit along `ray` (scalar reference traversal of the binary BVH).
+    pub fn intersect1_reference(&self, ray: &Ray) -> Hit {
+        self.bvh2.intersect(ray, |prim, tfar| self.intersect_prim(prim, ray, tfar))
+    }
+
+    /// True when anything lies in `(ray.tnear, ray.tfar]` (scalar reference traversal).
+    pub fn occluded1_reference(&self, ray: &Ray) -> bool {
+        self.bvh2.occluded(ray, |prim| self.intersect_prim(prim, ray, ray.tfar).is_some())
+    }
+
+    /// Closest hit by testing every primitive: the oracle for tests and the CS184
+    /// "without BVH" timing. Ties in `t` keep the lowest primitive id.
+    pub fn intersect1_brute_force(&self, ray: &Ray) -> Hit {
+        let mut hit = Hit::MISS;
+        if !ray.is_valid() {
+            return hit;
+        }
+        let mut tfar = ray.tfar;
+        for prim in 0..self.num_prims() as u32 {
+            if let Some((t, u, v)) = self.intersect_prim(prim, ray, tfar) {
+                if t < tfar || !hit.is_hit() {
+                    tfar = t;
+                    hit = Hit { t, u, v, prim };
+                }
+            }
+        }
+        hit
+    }
+
+    /// Closest hit along `ray`.
+    #[inline]
+    pub fn intersect1(&self, ray: &Ray) -> Hit {
+        self.intersect1_reference(ray)
+    }
+
+    /// True when anything blocks `ray` over `(tnear, tfar]`.
+    #[inline]
+    pub fn occluded1(&self, ray: &Ray) -> bool {
+        self.occluded1_reference(ray)
+    }
+
+    /// Local geometry at `hit` (which must be a hit of `ray` on this scene).
+    pub fn surface(&self, ray: &Ray, hit: &Hit) -> SurfaceHit {
+        let nt = self.triangles.len();
+        let p = hit.prim as usize;
+        let position = ray.at(hit.t);
+        if p < nt {
+            let [a, b, c] = self.triangles.vertices(p);
+            let ng = (b - a).cross(c - a).normalize_or(Vec3::Z);
+            let mut ns = ng;
+            if !self.triangles.normals.is_empty() {
+                let [ia, ib, ic] = self.triangles.indices[p];
+                let n = &self.triangles.normals;
+                let w = 1.0 - hit.u - hit.v;
+                let interp = n[ia as usize] * w + n[ib as usize] * hit.u + n[ic as usize] * hit.v;
+                if let Some(i) = interp.try_normalize() {
+                    ns = if i.dot(ng) < 0.0 { -i } else { i };
+                }
+            }
+            // Interpolated vertex normals may face away from the geometric normal's side;
+            // keep them consistent so that shading and offsetting agree.
+            SurfaceHit { position, geometric_normal: ng, shading_normal: ns, material: self.triangles.material[p] }
+        } else {
+            let s = p - nt;
+            let n = ((position - self.spheres.center[s]) / self.spheres.radius[s]).normalize_or(Vec3::Z);
+            SurfaceHit { position, geometric_normal: n, shading_normal: n, material: self.spheres.material[s] }
+        }
+    }
+}
