@@ -23,6 +23,7 @@
 #![deny(missing_docs)]
 
 pub mod bvh;
+pub mod generate;
 pub mod geometry;
 pub mod io;
 pub mod math;

@@ -1,1 +1,286 @@
-fn main() {}
+//! The `raypack` command line: `render`, `info` (and `bench`).
+//!
+//! CS184's flags work as short options (`-t -s -l -m -r -f -a -H -c`), each with a long
+//! equivalent. `raypack SCENE [flags]` without a subcommand means `raypack render`.
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use raypack::io::LoadError;
+use raypack::render::{self, IntegratorKind, RenderSettings};
+use raypack::{BuildOptions, BuildQuality, Scene, SceneBuilder};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+#[derive(Parser)]
+#[command(name = "raypack", version, about = "A data-oriented SIMD ray tracer with a CS184-style path tracer")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene (the built-in Cornell box when SCENE is omitted) to an image.
+    Render(RenderArgs),
+    /// Load a scene, build its BVH and print statistics.
+    Info(InfoArgs),
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum IntegratorArg {
+    /// Shading normals as colours (CS184 parts 1-2).
+    Normals,
+}
+
+#[derive(Args)]
+struct RenderArgs {
+    /// Scene file (.dae, .obj, .ply); omit for the built-in Cornell box.
+    scene: Option<PathBuf>,
+    /// Worker threads (default: all cores).
+    #[arg(short = 't', long = "threads")]
+    threads: Option<usize>,
+    /// Camera rays per pixel.
+    #[arg(short = 's', long = "samples", default_value_t = 1)]
+    samples: u32,
+    /// Shadow rays per area light.
+    #[arg(short = 'l', long = "light-samples", default_value_t = 1)]
+    light_samples: u32,
+    /// Maximum ray depth.
+    #[arg(short = 'm', long = "max-depth", default_value_t = 1)]
+    max_depth: u32,
+    /// Image size in pixels.
+    #[arg(short = 'r', long = "resolution", num_args = 2, value_names = ["WIDTH", "HEIGHT"], default_values_t = [480, 360])]
+    resolution: Vec<usize>,
+    /// Output image (.png, or .exr for linear radiance); default: SCENE's name with .png.
+    #[arg(short = 'f', long = "output")]
+    output: Option<PathBuf>,
+    /// CS184 camera settings file to render from.
+    #[arg(short = 'c', long = "camera")]
+    camera: Option<PathBuf>,
+    /// Adaptive sampling: batch size and tolerance.
+    #[arg(short = 'a', long = "adaptive", num_args = 2, value_names = ["BATCH", "TOLERANCE"])]
+    adaptive: Option<Vec<f32>>,
+    /// Uniform hemisphere sampling for direct lighting instead of light sampling.
+    #[arg(short = 'H', long = "hemisphere")]
+    hemisphere: bool,
+    /// What to compute per camera ray.
+    #[arg(long, value_enum, default_value_t = IntegratorArg::Normals)]
+    integrator: IntegratorArg,
+    /// Seed of all random numbers.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Trace without the BVH, testing every primitive (CS184's "without BVH" timing).
+    #[arg(long)]
+    brute_force: bool,
+    /// BVH build effort.
+    #[arg(long, value_enum, default_value_t = QualityArg::Medium)]
+    quality: QualityArg,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum QualityArg {
+    Fast,
+    Medium,
+    High,
+}
+
+impl From<QualityArg> for BuildQuality {
+    fn from(q: QualityArg) -> Self {
+        match q {
+            QualityArg::Fast => BuildQuality::Fast,
+            QualityArg::Medium => BuildQuality::Medium,
+            QualityArg::High => BuildQuality::High,
+        }
+    }
+}
+
+#[derive(Args)]
+struct InfoArgs {
+    /// Scene file (.dae, .obj, .ply).
+    scene: PathBuf,
+    /// Check the BVH's structural invariants.
+    #[arg(long)]
+    validate: bool,
+}
+
+/// A failure the CLI reports: bad input or environment exits with 2, as issue #2 asks.
+#[derive(Debug, thiserror::Error)]
+enum CliError {
+    #[error(transparent)]
+    Load(#[from] LoadError),
+    #[error(transparent)]
+    Image(#[from] render::ImageError),
+    #[error("{0}")]
+    Usage(String),
+}
+
+fn main() -> ExitCode {
+    let mut args: Vec<std::ffi::OsString> = std::env::args_os().collect();
+    // CS184 style: `raypack scene.dae -t 8 ...` means `raypack render scene.dae -t 8 ...`.
+    let known = ["render", "info", "help", "-h", "--help", "-V", "--version"];
+    if args.len() > 1 && !known.iter().any(|k| args[1] == *k) {
+        args.insert(1, "render".into());
+    }
+    let cli = match Cli::try_parse_from(args) {
+        Ok(cli) => cli,
+        Err(e) => {
+            let code = if e.use_stderr() { 2 } else { 0 };
+            let _ = e.print();
+            return ExitCode::from(code);
+        }
+    };
+    let result = match cli.command {
+        Command::Render(a) => cmd_render(a),
+        Command::Info(a) => cmd_info(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("raypack: error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn load(scene: Option<&Path>) -> Result<SceneBuilder, CliError> {
+    Ok(match scene {
+        Some(p) => raypack::io::load_scene(p)?,
+        None => raypack::io::default_scene(),
+    })
+}
+
+fn commit(builder: SceneBuilder, opts: &BuildOptions) -> Scene {
+    let n = builder.num_triangles() + builder.num_spheres();
+    eprint!("[raypack] Building BVH from {n} primitives... ");
+    let t = Instant::now();
+    let (scene, report) = builder.commit(opts);
+    eprintln!("Done! ({:.4} sec)", t.elapsed().as_secs_f64());
+    if report.dropped() > 0 {
+        eprintln!("[raypack] warning: {report}");
+    }
+    scene
+}
+
+fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
+    let (width, height) = (a.resolution[0], a.resolution[1]);
+    if width == 0 || height == 0 || width > 1 << 15 || height > 1 << 15 {
+        return Err(CliError::Usage(format!("-r {width} {height}: width and height must be between 1 and 32768")));
+    }
+    let adaptive = match a.adaptive.as_deref() {
+        None => None,
+        Some([batch, tol]) if *batch >= 1.0 && batch.fract() == 0.0 && *tol > 0.0 => Some((*batch as u32, *tol)),
+        Some(v) => {
+            return Err(CliError::Usage(format!("-a {v:?}: expected a whole batch size >= 1 and a tolerance > 0")));
+        }
+    };
+    if a.threads == Some(0) {
+        return Err(CliError::Usage("-t 0: need at least one thread".into()));
+    }
+    let output = a.output.clone().unwrap_or_else(|| {
+        let stem = a.scene.as_ref().and_then(|s| s.file_stem()).map(|s| s.to_string_lossy().into_owned());
+        PathBuf::from(format!("{}.png", stem.as_deref().unwrap_or("cornell")))
+    });
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads.unwrap_or(0))
+        .build()
+        .map_err(|e| CliError::Usage(e.to_string()))?;
+    pool.install(|| {
+        eprint!("[raypack] Collecting primitives... ");
+        let t = Instant::now();
+        let builder = load(a.scene.as_deref())?;
+        eprintln!("Done! ({:.4} sec)", t.elapsed().as_secs_f64());
+        let opts = BuildOptions { quality: a.quality.into(), ..BuildOptions::default() };
+        let scene = commit(builder, &opts);
+        let aspect = width as f32 / height as f32;
+        let camera = match &a.camera {
+            Some(p) => raypack::io::camera_file::load_camera_file(p)?,
+            None => scene.camera_or_framing(aspect),
+        };
+        let settings = RenderSettings {
+            width,
+            height,
+            samples_per_pixel: a.samples.max(1),
+            light_samples: a.light_samples.max(1),
+            max_depth: a.max_depth,
+            hemisphere_sampling: a.hemisphere,
+            adaptive,
+            integrator: match a.integrator {
+                IntegratorArg::Normals => IntegratorKind::Normals,
+            },
+            seed: a.seed,
+            brute_force: a.brute_force,
+        };
+        let bar = progress_bar(width.div_ceil(render::TILE) * height.div_ceil(render::TILE));
+        eprintln!("[raypack] Rendering {width}x{height} with {} threads...", rayon::current_num_threads());
+        let out = render::render(&scene, &camera, &settings, &|done| bar.set_position(done));
+        bar.finish_and_clear();
+        let secs = out.stats.time.as_secs_f64();
+        let rays = out.stats.rays;
+        eprintln!("[raypack] Rendering... 100%! ({secs:.4}s)");
+        eprintln!(
+            "[raypack] BVH traced {} rays (camera {}, shadow {}, bounce {}).",
+            rays.total(),
+            rays.camera,
+            rays.shadow,
+            rays.bounce
+        );
+        eprintln!("[raypack] Average speed {:.4} million rays per second.", rays.total() as f64 / secs / 1e6);
+        let tests = raypack::render::stats::intersection_tests_per_ray(&scene, &camera, &settings);
+        eprintln!("[raypack] Averaged {tests:.3} intersection tests per camera ray.");
+        eprint!("[raypack] Saving to file: {}... ", output.display());
+        out.film.write(&output, settings.integrator.encoding())?;
+        eprintln!("Done!");
+        Ok(())
+    })
+}
+
+fn progress_bar(len: usize) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(len as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("[raypack] {bar:40} {percent:>3}% tiles {pos}/{len} eta {eta}")
+            .expect("valid template"),
+    );
+    bar
+}
+
+fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
+    let t = Instant::now();
+    let builder = load(Some(&a.scene))?;
+    let load_time = t.elapsed();
+    println!("scene       {}", a.scene.display());
+    println!("load        {:.4} s", load_time.as_secs_f64());
+    for quality in [BuildQuality::Fast, BuildQuality::Medium, BuildQuality::High] {
+        let opts = BuildOptions { quality, ..BuildOptions::default() };
+        let t = Instant::now();
+        let (scene, report) = builder.clone().commit(&opts);
+        let build = t.elapsed();
+        if quality == BuildQuality::Fast {
+            let b = scene.bounds();
+            println!("primitives  {report}");
+            println!(
+                "bounds      [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]",
+                b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z
+            );
+            println!(
+                "materials   {}, lights {}, camera {}",
+                scene.materials.len(),
+                scene.lights.len(),
+                if scene.camera.is_some() { "from file" } else { "framing (none in file)" }
+            );
+        }
+        println!(
+            "build {:<6} {:.4} s: {}",
+            format!("{quality:?}").to_lowercase(),
+            build.as_secs_f64(),
+            scene.bvh_stats()
+        );
+        if a.validate {
+            let bounds: Vec<_> = (0..scene.num_prims() as u32).map(|p| scene.prim_bounds(p)).collect();
+            match raypack::bvh::validate::validate_bvh2(scene.bvh2(), &bounds) {
+                Ok(()) => println!("validate    ok"),
+                Err(e) => return Err(CliError::Usage(format!("BVH invalid: {e}"))),
+            }
+        }
+    }
+    Ok(())
+}

@@ -118,10 +118,7 @@ enum Slot {
 pub fn build_bvh2(prims: &mut [BuildPrim], opts: &BuildOptions) -> Bvh2 {
     let n = prims.len();
     if n == 0 {
-        return Bvh2 {
-            nodes: vec![Bvh2Node { bounds: Aabb::EMPTY, start: 0, count: 0 }],
-            prim_ids: Vec::new(),
-        };
+        return Bvh2 { nodes: vec![Bvh2Node { bounds: Aabb::EMPTY, start: 0, count: 0 }], prim_ids: Vec::new() };
     }
     let mut slots = vec![Slot::Unused; 2 * n - 1];
     let ctx = Ctx { opts, bins: opts.bin_count(), max_leaf: opts.max_leaf_size.max(1) };
@@ -151,7 +148,15 @@ fn centroid_bounds(prims: &[BuildPrim]) -> Aabb {
 
 /// Builds the subtree over `prims` (which start at `first` in the global array) into
 /// `slots`, whose slot 0 is the subtree root and whose global index is `base`.
-fn build_rec(ctx: &Ctx, prims: &mut [BuildPrim], first: usize, slots: &mut [Slot], base: u32, bounds: Aabb, depth: usize) {
+fn build_rec(
+    ctx: &Ctx,
+    prims: &mut [BuildPrim],
+    first: usize,
+    slots: &mut [Slot],
+    base: u32,
+    bounds: Aabb,
+    depth: usize,
+) {
     let n = prims.len();
     debug_assert_eq!(slots.len(), 2 * n - 1);
     let leaf = Slot::Leaf { bounds, start: first as u32, count: n as u32 };
@@ -264,9 +269,8 @@ fn bin_index(c: f32, lo: f32, scale: f32, k: usize) -> usize {
 }
 
 fn bin_prims(prims: &[BuildPrim], cb: &Aabb, k: usize) -> [Bins; 3] {
-    let maps: [(f32, f32); 3] = std::array::from_fn(|a| {
-        if cb.extent()[a] > 0.0 { bin_mapping(cb, a, k) } else { (cb.min[a], 0.0) }
-    });
+    let maps: [(f32, f32); 3] =
+        std::array::from_fn(|a| if cb.extent()[a] > 0.0 { bin_mapping(cb, a, k) } else { (cb.min[a], 0.0) });
     let bin_chunk = |chunk: &[BuildPrim]| {
         let mut bins = [[(Aabb::EMPTY, 0u32); MAX_BINS]; 3];
         for p in chunk {
@@ -284,15 +288,19 @@ fn bin_prims(prims: &[BuildPrim], cb: &Aabb, k: usize) -> [Bins; 3] {
         return bin_chunk(prims);
     }
     use rayon::prelude::*;
-    prims.par_chunks(PARALLEL_BIN_THRESHOLD / 4).map(bin_chunk).reduce_with(|mut a, b| {
-        for axis in 0..3 {
-            for i in 0..k {
-                a[axis][i].0 = a[axis][i].0.union(&b[axis][i].0);
-                a[axis][i].1 += b[axis][i].1;
+    prims
+        .par_chunks(PARALLEL_BIN_THRESHOLD / 4)
+        .map(bin_chunk)
+        .reduce_with(|mut a, b| {
+            for axis in 0..3 {
+                for i in 0..k {
+                    a[axis][i].0 = a[axis][i].0.union(&b[axis][i].0);
+                    a[axis][i].1 += b[axis][i].1;
+                }
             }
-        }
-        a
-    }).expect("non-empty")
+            a
+        })
+        .expect("non-empty")
 }
 
 /// Object-median split on the largest centroid axis (by index when all centroids agree).
@@ -300,7 +308,9 @@ fn median_split(prims: &mut [BuildPrim], cb: &Aabb) -> usize {
     let mid = prims.len() / 2;
     let axis = cb.largest_axis();
     if cb.extent()[axis] > 0.0 {
-        prims.select_nth_unstable_by(mid, |a, b| a.centroid()[axis].total_cmp(&b.centroid()[axis]).then(a.id.cmp(&b.id)));
+        prims.select_nth_unstable_by(mid, |a, b| {
+            a.centroid()[axis].total_cmp(&b.centroid()[axis]).then(a.id.cmp(&b.id))
+        });
     }
     mid
 }
@@ -320,6 +330,25 @@ fn partition(prims: &mut [BuildPrim], pred: impl Fn(&BuildPrim) -> bool) -> usiz
     i
 }
 
+/// Relative padding of node bounds; see [`pad_outward`].
+pub const BOUNDS_PADDING: f32 = 1.0 / (1 << 20) as f32;
+
+/// Grows a node box outward by `BOUNDS_PADDING` times its largest coordinate magnitude or
+/// extent. Without it, a ray travelling exactly in a box's boundary plane (a zero direction
+/// component, origin on the plane) gets an empty slab interval even though the triangle test
+/// hits the primitive on that plane — rays aimed straight at the shared edges of an
+/// axis-aligned grid do exactly that. The padding is monotone, so children stay inside
+/// their parents.
+#[inline]
+pub fn pad_outward(b: &Aabb) -> Aabb {
+    if !b.is_valid() {
+        return *b;
+    }
+    let scale = b.min.abs().max(b.max.abs()).max(b.extent()).max_element() * BOUNDS_PADDING;
+    let scale = scale.max(f32::MIN_POSITIVE);
+    Aabb { min: b.min - Vec3::splat(scale), max: b.max + Vec3::splat(scale) }
+}
+
 /// Renumbers the reserved-range slots depth first so that siblings are adjacent.
 fn compact(slots: &[Slot]) -> Vec<Bvh2Node> {
     let used = slots.iter().filter(|s| !matches!(s, Slot::Unused)).count();
@@ -329,10 +358,12 @@ fn compact(slots: &[Slot]) -> Vec<Bvh2Node> {
     let mut stack = vec![(0u32, 0u32)];
     while let Some((s, f)) = stack.pop() {
         match slots[s as usize] {
-            Slot::Leaf { bounds, start, count } => nodes[f as usize] = Bvh2Node { bounds, start, count },
+            Slot::Leaf { bounds, start, count } => {
+                nodes[f as usize] = Bvh2Node { bounds: pad_outward(&bounds), start, count }
+            }
             Slot::Inner { bounds, left, right } => {
                 let c = nodes.len() as u32;
-                nodes[f as usize] = Bvh2Node { bounds, start: c, count: 0 };
+                nodes[f as usize] = Bvh2Node { bounds: pad_outward(&bounds), start: c, count: 0 };
                 nodes.push(Bvh2Node { bounds: Aabb::EMPTY, start: 0, count: 0 });
                 nodes.push(Bvh2Node { bounds: Aabb::EMPTY, start: 0, count: 0 });
                 stack.push((right, c + 1));

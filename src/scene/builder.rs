@@ -107,7 +107,12 @@ impl SceneBuilder {
     }
 
     /// Adds a triangle mesh (positions already in world space).
-    pub fn add_mesh(&mut self, positions: &[Vec3], indices: &[[u32; 3]], material: MaterialId) -> Result<(), SceneError> {
+    pub fn add_mesh(
+        &mut self,
+        positions: &[Vec3],
+        indices: &[[u32; 3]],
+        material: MaterialId,
+    ) -> Result<(), SceneError> {
         self.add_mesh_with_normals(positions, None, indices, material)
     }
 
@@ -245,7 +250,13 @@ impl SceneBuilder {
         let mut spheres = SpheresSoa::default();
         for i in 0..in_spheres.len() {
             let (c, r) = (in_spheres.center[i], in_spheres.radius[i]);
-            if ok(c) && r.is_finite() && r > 0.0 && r <= MAX_COORDINATE && ok(c + Vec3::splat(r)) && ok(c - Vec3::splat(r)) {
+            if ok(c)
+                && r.is_finite()
+                && r > 0.0
+                && r <= MAX_COORDINATE
+                && ok(c + Vec3::splat(r))
+                && ok(c - Vec3::splat(r))
+            {
                 spheres.center.push(c);
                 spheres.radius.push(r);
                 spheres.material.push(in_spheres.material[i]);

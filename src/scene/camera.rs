@@ -52,7 +52,15 @@ impl Camera {
         let dist = radius / half.atan().sin();
         let dir = Vec3::new(0.0, 0.35, 1.0).normalize();
         let position = center + dir * dist;
-        Self::look_at(position, center, Vec3::Y, vfov, aspect, (dist - radius).max(dist * 1e-4) * 0.5, (dist + radius) * 2.0)
+        Self::look_at(
+            position,
+            center,
+            Vec3::Y,
+            vfov,
+            aspect,
+            (dist - radius).max(dist * 1e-4) * 0.5,
+            (dist + radius) * 2.0,
+        )
     }
 
     /// Keeps the vertical field of view and recomputes the horizontal one for an image of

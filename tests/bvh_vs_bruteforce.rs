@@ -1,0 +1,142 @@
+//! The BVH answers exactly what testing every primitive answers.
+
+mod common;
+
+use common::{random_rays, scene_of};
+use raypack::bvh::validate::validate_bvh2;
+use raypack::generate::{grid, random_soup, uv_sphere};
+use raypack::{BuildOptions, Hit, Ray, Scene, SplitMethod, Vec3};
+
+/// Compares the reference BVH with brute force on `rays`; returns the number compared.
+fn check(scene: &Scene, rays: &[Ray], what: &str) -> usize {
+    let bounds: Vec<_> = (0..scene.num_prims() as u32).map(|p| scene.prim_bounds(p)).collect();
+    validate_bvh2(scene.bvh2(), &bounds).unwrap_or_else(|e| panic!("{what}: invalid BVH: {e}"));
+    let mut hits = 0;
+    for (i, ray) in rays.iter().enumerate() {
+        let bvh = scene.intersect1_reference(ray);
+        let brute = scene.intersect1_brute_force(ray);
+        assert_eq!(bvh.is_hit(), brute.is_hit(), "{what}: ray {i} {ray:?}: bvh {bvh:?} brute {brute:?}");
+        if brute.is_hit() {
+            hits += 1;
+            let rel = (bvh.t - brute.t).abs() / brute.t.abs().max(1e-30);
+            assert!(rel <= 1e-6, "{what}: ray {i}: t {} vs {}", bvh.t, brute.t);
+            if bvh.prim != brute.prim {
+                // Allowed only when another primitive is hit at the same distance.
+                let other = scene.intersect_prim(bvh.prim, ray, ray.tfar).expect("bvh prim is hit");
+                assert!(
+                    (other.0 - brute.t).abs() <= 1e-6 * brute.t,
+                    "{what}: ray {i}: prim {} vs {}",
+                    bvh.prim,
+                    brute.prim
+                );
+            }
+        }
+        let occluded = scene.occluded1_reference(ray);
+        assert_eq!(occluded, brute.is_hit(), "{what}: ray {i}: occluded {occluded} vs brute {brute:?}");
+        // A shortened ray is occluded exactly when the closest hit lies within it.
+        if brute.is_hit() {
+            let short = Ray { tfar: brute.t * 0.5, ..*ray };
+            assert_eq!(
+                scene.occluded1_reference(&short),
+                scene.intersect1_brute_force(&short).is_hit(),
+                "{what}: ray {i} short"
+            );
+        }
+    }
+    assert!(hits > rays.len() / 20, "{what}: too few hits ({hits}) for a meaningful test");
+    rays.len()
+}
+
+#[test]
+fn random_soups_over_leaf_sizes() {
+    let mut total = 0;
+    for (seed, leaf) in [(1u64, 1usize), (2, 4), (3, 8)] {
+        let soup = random_soup(3000, 0.08, seed);
+        let opts = BuildOptions { max_leaf_size: leaf, ..BuildOptions::default() };
+        let scene = scene_of(&[&soup], &[], &opts);
+        total += check(&scene, &random_rays(&scene, 40_000, seed), &format!("soup leaf {leaf}"));
+    }
+    assert!(total >= 100_000);
+}
+
+#[test]
+fn shared_edge_meshes_and_spheres() {
+    let g = grid(60, 60).map_positions(|p| p + Vec3::new(0.0, 0.0, -0.5));
+    let s = uv_sphere(40, 60).map_positions(|p| p * 0.4 + Vec3::new(0.3, 0.0, 0.2));
+    let spheres = [(Vec3::new(-0.5, 0.5, 0.0), 0.3), (Vec3::new(0.5, -0.5, 0.3), 0.2)];
+    let scene = scene_of(&[&g, &s], &spheres, &BuildOptions::default());
+    check(&scene, &random_rays(&scene, 60_000, 9), "grid+sphere");
+    // Rays exactly through grid vertices and edge midpoints, straight down: every one must
+    // hit the grid, and BVH and brute force must agree.
+    let mut rays = Vec::new();
+    for p in &g.positions {
+        rays.push(Ray::new(*p + Vec3::new(0.0, 0.0, 2.0), -Vec3::Z));
+    }
+    for t in &g.indices {
+        let (a, b) = (g.positions[t[0] as usize], g.positions[t[1] as usize]);
+        rays.push(Ray::new((a + b) * 0.5 + Vec3::new(0.0, 0.0, 2.0), -Vec3::Z));
+    }
+    check(&scene, &rays, "grid vertices and edges");
+}
+
+#[test]
+fn degenerate_inputs_build_valid_trees() {
+    // All triangles at one point, duplicates, and a single primitive.
+    let point = random_soup(100, 0.0, 5).map_positions(|_| Vec3::splat(0.25));
+    let dup = {
+        let mut m = random_soup(1, 0.3, 6);
+        for _ in 0..200 {
+            m.append(&random_soup(1, 0.3, 6));
+        }
+        m
+    };
+    for (what, mesh) in [("point", &point), ("duplicates", &dup), ("single", &random_soup(1, 0.5, 7))] {
+        for leaf in [1, 4] {
+            let scene = scene_of(&[mesh], &[], &BuildOptions { max_leaf_size: leaf, ..BuildOptions::default() });
+            let bounds: Vec<_> = (0..scene.num_prims() as u32).map(|p| scene.prim_bounds(p)).collect();
+            validate_bvh2(scene.bvh2(), &bounds).unwrap_or_else(|e| panic!("{what}: {e}"));
+            for r in random_rays(&scene, 2000, 3) {
+                assert_eq!(scene.intersect1_reference(&r).t.to_bits(), scene.intersect1_brute_force(&r).t.to_bits());
+            }
+        }
+    }
+    // An empty scene misses everything.
+    let empty = scene_of(&[], &[], &BuildOptions::default());
+    assert_eq!(empty.intersect1(&Ray::new(Vec3::ZERO, Vec3::X)), Hit::MISS);
+}
+
+#[test]
+fn sah_beats_median_split() {
+    for (what, mesh) in [
+        ("soup", random_soup(20_000, 0.05, 11)),
+        ("clustered", {
+            let mut m = random_soup(10_000, 0.01, 12).map_positions(|p| p * 0.1);
+            m.append(&random_soup(2_000, 0.05, 13).map_positions(|p| p + Vec3::splat(3.0)));
+            m
+        }),
+        ("sphere", uv_sphere(100, 100)),
+    ] {
+        let sah = scene_of(&[&mesh], &[], &BuildOptions::default()).bvh_stats();
+        let med = scene_of(&[&mesh], &[], &BuildOptions { split: SplitMethod::Median, ..BuildOptions::default() })
+            .bvh_stats();
+        eprintln!("{what}: SAH {sah}\n{what}: median {med}");
+        assert!(
+            sah.sah_cost < med.sah_cost,
+            "{what}: SAH cost {} is not below median's {}",
+            sah.sah_cost,
+            med.sah_cost
+        );
+    }
+}
+
+#[test]
+fn build_is_identical_whatever_the_thread_count() {
+    let mesh = random_soup(200_000, 0.01, 21);
+    let build = |threads| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| scene_of(&[&mesh], &[], &BuildOptions::default()))
+    };
+    let (a, b) = (build(1), build(2));
+    assert_eq!(a.bvh2().prim_ids, b.bvh2().prim_ids);
+    assert_eq!(a.bvh2().nodes, b.bvh2().nodes);
+}

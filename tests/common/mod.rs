@@ -1,0 +1,49 @@
+//! Shared helpers for integration tests: scene construction, ray generators, scene paths.
+#![allow(dead_code)]
+
+use raypack::generate::Mesh;
+use raypack::render::sampler::Rng;
+use raypack::{BuildOptions, Material, Ray, Scene, SceneBuilder, Vec3};
+use std::path::PathBuf;
+
+/// Commits `meshes` (and `spheres`: centre, radius) into a scene with one diffuse material.
+pub fn scene_of(meshes: &[&Mesh], spheres: &[(Vec3, f32)], opts: &BuildOptions) -> Scene {
+    let mut b = SceneBuilder::new();
+    let m = b.add_material(Material::diffuse(Vec3::splat(0.5)));
+    for mesh in meshes {
+        b.add_mesh(&mesh.positions, &mesh.indices, m).expect("valid mesh");
+    }
+    for &(c, r) in spheres {
+        b.add_sphere(c, r, m).expect("valid sphere");
+    }
+    b.commit(opts).0
+}
+
+/// `n` rays with origins in the box grown by half its size and directions uniform on the
+/// sphere, aimed so that most of them pass through the box.
+pub fn random_rays(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
+    let b = scene.bounds();
+    let (c, e) = (b.center(), b.extent().max(Vec3::splat(1e-3)));
+    let mut rng = Rng::new(seed, 0xA11CE);
+    (0..n)
+        .map(|_| {
+            let mut r3 = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5;
+            let origin = c + r3() * e * 2.0;
+            let target = c + r3() * e;
+            Ray::new(origin, (target - origin).normalize_or(Vec3::X))
+        })
+        .collect()
+}
+
+/// The root of the third-party scenes (`RAYPACK_SCENES`), or `None` with a loud notice.
+pub fn scenes_dir(test: &str) -> Option<PathBuf> {
+    match std::env::var_os("RAYPACK_SCENES") {
+        Some(d) if !d.is_empty() => Some(PathBuf::from(d)),
+        _ => {
+            eprintln!(
+                "SKIPPED {test}: RAYPACK_SCENES is not set (e.g. RAYPACK_SCENES=../shared/scenes); third-party scenes not tested"
+            );
+            None
+        }
+    }
+}
