@@ -1,35 +1,192 @@
 //! Scene loaders: COLLADA (`.dae`, CS184 dialect), OBJ and PLY. Each returns a
 //! [`crate::SceneBuilder`] or a [`LoadError`] naming the file and the element or line.
+//!
+//! Files without a camera get none: the renderer frames the bounding box
+//! ([`crate::Scene::camera_or_framing`]). Files without lights get [`default_light_rig`]: one
+//! point light above and in front of the scene, on the camera's side. A point light is a
+//! delta light that a hemisphere sampler can never hit, so with `-H` (uniform hemisphere
+//! sampling for direct light) such scenes render black, exactly as CS184's do for its
+//! point-lit scenes such as `sky/dragon.dae`; light sampling (the default) lights them.
+//! (CS184 itself adds a uniform white `AmbientLight` to light-less scenes.)
 
 pub mod camera_file;
+pub mod dae;
 pub mod error;
+pub mod obj;
+pub mod ply;
 
+pub use dae::{CameraPlacement, DaeOptions};
 pub use error::LoadError;
 
-use crate::math::Vec3;
-use crate::scene::{Light, Material, SceneBuilder};
+use crate::math::{Aabb, Vec3};
+use crate::scene::{Camera, Light, Material, SceneBuilder};
 use std::path::Path;
 
-/// Loads a scene file, choosing the format by extension (`.dae`, `.obj`, `.ply`).
-pub fn load_scene(path: &Path) -> Result<SceneBuilder, LoadError> {
-    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
-    match ext.as_deref() {
-        _ => Err(LoadError::UnsupportedFormat { path: path.to_path_buf() }),
+/// The scene file formats raypack reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SceneFormat {
+    /// COLLADA 1.4.1 in the CS184 / CMU462 dialect.
+    Dae,
+    /// Wavefront OBJ (+ MTL).
+    Obj,
+    /// Stanford PLY.
+    Ply,
+}
+
+impl SceneFormat {
+    /// The format named by a file's extension (case-insensitive).
+    pub fn from_path(path: &Path) -> Option<Self> {
+        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        match ext.as_str() {
+            "dae" => Some(SceneFormat::Dae),
+            "obj" => Some(SceneFormat::Obj),
+            "ply" => Some(SceneFormat::Ply),
+            _ => None,
+        }
     }
 }
 
-/// The project's own default scene (a Cornell box with two spheres and an area light).
+/// Loads a scene file, choosing the format by extension (`.dae`, `.obj`, `.ply`), and prints
+/// the loader's warnings to stderr. Adds [`default_light_rig`] when the file has no lights.
+pub fn load_scene(path: &Path) -> Result<SceneBuilder, LoadError> {
+    let (builder, warnings) = load_scene_with_warnings(path)?;
+    for w in warnings {
+        eprintln!("[raypack] warning: {w}");
+    }
+    Ok(builder)
+}
+
+/// [`load_scene`] without printing: returns the warnings (each naming the file).
+pub fn load_scene_with_warnings(path: &Path) -> Result<(SceneBuilder, Vec<String>), LoadError> {
+    let format =
+        SceneFormat::from_path(path).ok_or_else(|| LoadError::UnsupportedFormat { path: path.to_path_buf() })?;
+    let bytes = std::fs::read(path).map_err(|source| LoadError::Io { path: path.to_path_buf(), source })?;
+    let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let read_mtl = move |p: &Path| std::fs::read(dir.join(p)).ok();
+    load_with(&bytes, format, path, &read_mtl)
+}
+
+/// Loads a scene held in memory (for tests and fuzzing). `name` only names it in errors;
+/// OBJ material libraries are not looked up.
+pub fn load_scene_from_bytes(
+    bytes: &[u8],
+    format: SceneFormat,
+    name: &Path,
+) -> Result<(SceneBuilder, Vec<String>), LoadError> {
+    load_with(bytes, format, name, &|_| None)
+}
+
+fn load_with(
+    bytes: &[u8],
+    format: SceneFormat,
+    path: &Path,
+    read_mtl: &dyn Fn(&Path) -> Option<Vec<u8>>,
+) -> Result<(SceneBuilder, Vec<String>), LoadError> {
+    let (mut builder, warnings) = match format {
+        SceneFormat::Dae => {
+            let text = std::str::from_utf8(bytes)
+                .map_err(|e| LoadError::parse(path, format!("byte {}", e.valid_up_to()), "not UTF-8 text"))?;
+            dae::parse_dae(text, path, &DaeOptions::default())?
+        }
+        SceneFormat::Obj => obj::parse_obj(bytes, path, read_mtl)?,
+        SceneFormat::Ply => {
+            let mesh = ply::parse_ply(bytes, path)?;
+            let mut b = SceneBuilder::new();
+            let m = b.add_material(Material::default());
+            let normals = vertex_normals(&mesh.positions, &mesh.triangles);
+            b.add_mesh_with_normals(&mesh.positions, Some(&normals), &mesh.triangles, m)
+                .map_err(|e| LoadError::parse(path, "element face", e.to_string()))?;
+            let mut w = Vec::new();
+            if mesh.skipped_faces > 0 {
+                w.push(format!("{} faces with fewer than 3 corners skipped", mesh.skipped_faces));
+            }
+            (b, w)
+        }
+    };
+    let mut warnings: Vec<String> = warnings.into_iter().map(|w| format!("{}: {w}", path.display())).collect();
+    if builder.lights().is_empty() {
+        for light in default_light_rig(&builder.bounds(), builder.camera()) {
+            builder.add_light(light);
+        }
+        warnings
+            .push(format!("{}: no lights in the file; added the default light rig (one point light)", path.display()));
+    }
+    Ok((builder, warnings))
+}
+
+/// The lights given to scenes that have none: one point light above and in front of the
+/// scene on the camera's side (`camera`, or the framing camera when `None`), three bounding
+/// radii from the centre, with intensity `π d²` so that the irradiance at the centre is `π`
+/// (a white Lambertian surface facing the light there has radiance 1), whatever the scene's
+/// scale.
+pub fn default_light_rig(bounds: &Aabb, camera: Option<&Camera>) -> Vec<Light> {
+    let (center, radius) = if bounds.is_valid() && bounds.min.is_finite() && bounds.max.is_finite() {
+        (bounds.center(), (bounds.extent().length() * 0.5).max(1e-3))
+    } else {
+        (Vec3::ZERO, 1.0)
+    };
+    let cam = camera.copied().unwrap_or_else(|| Camera::framing(bounds, 4.0 / 3.0));
+    let (right, up, back) = (cam.c2w.x_axis, cam.c2w.y_axis, cam.c2w.z_axis);
+    let dir = (back + up + 0.5 * right).normalize_or(Vec3::Y);
+    let d = 3.0 * radius;
+    vec![Light::Point { position: center + dir * d, intensity: Vec3::splat(std::f32::consts::PI * d * d) }]
+}
+
+/// Per-vertex shading normals as CS184 computes them (`Vertex::normal()` of its halfedge
+/// mesh): the sum of the incident faces' `(b - a) × (c - a)`, i.e. area-weighted, normalised.
+/// Vertices on no (finite, non-degenerate) face get a zero normal ("use the geometric one").
+pub fn vertex_normals(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Vec3> {
+    let mut n = vec![Vec3::ZERO; positions.len()];
+    for t in triangles {
+        let [Some(&a), Some(&b), Some(&c)] = t.map(|i| positions.get(i as usize)) else {
+            continue;
+        };
+        let f = (b - a).cross(c - a);
+        if f.is_finite() {
+            for &i in t {
+                n[i as usize] += f;
+            }
+        }
+    }
+    for v in &mut n {
+        *v = v.normalize_or_zero();
+    }
+    n
+}
+
+/// The project's own scene `scenes/cornell.dae`, compiled in: a Cornell box with a mirror
+/// and a glass sphere and an area light (see `scenes/README.md`).
 pub fn default_scene() -> SceneBuilder {
-    // Placeholder until the COLLADA loader reads scenes/cornell.dae.
-    let mut b = SceneBuilder::new();
-    let white = b.add_material(Material::diffuse(Vec3::splat(0.7)));
-    let quad = |b: &mut SceneBuilder, p: [Vec3; 4], m| b.add_mesh(&p, &[[0, 1, 2], [0, 2, 3]], m).expect("valid quad");
-    quad(
-        &mut b,
-        [Vec3::new(-1.0, 0.0, -1.0), Vec3::new(-1.0, 0.0, 1.0), Vec3::new(1.0, 0.0, 1.0), Vec3::new(1.0, 0.0, -1.0)],
-        white,
-    );
-    b.add_sphere(Vec3::new(-0.4, 0.3, -0.3), 0.3, white).expect("material exists");
-    b.add_light(Light::Point { position: Vec3::new(0.0, 1.5, 0.0), intensity: Vec3::splat(3.0) });
-    b
+    const CORNELL: &str = include_str!("../../scenes/cornell.dae");
+    let (builder, _) = dae::parse_dae(CORNELL, Path::new("scenes/cornell.dae"), &DaeOptions::default())
+        .expect("the built-in scenes/cornell.dae parses (tested)");
+    builder
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_scene_is_the_cornell_box() {
+        let b = default_scene();
+        assert_eq!(b.num_spheres(), 2);
+        assert!(b.num_triangles() >= 10);
+        assert!(b.lights().iter().any(|l| matches!(l, Light::Area { .. })));
+        assert!(b.camera().is_some());
+    }
+
+    #[test]
+    fn light_rig_scales_with_the_scene_and_sits_above_in_front() {
+        let small = Aabb::new(Vec3::splat(-1.0), Vec3::splat(1.0));
+        let big = Aabb::new(Vec3::splat(-100.0), Vec3::splat(100.0));
+        let (Light::Point { position: p1, intensity: i1 }, Light::Point { position: p2, intensity: i2 }) =
+            (default_light_rig(&small, None)[0], default_light_rig(&big, None)[0])
+        else {
+            panic!("point lights expected");
+        };
+        assert!(p1.y > 1.0 && p1.z > 1.0, "above and in front of the framing camera's side: {p1}");
+        // Irradiance at the centre, I / d², is the same at both scales.
+        assert!((i1.x / p1.length_squared() - i2.x / p2.length_squared()).abs() < 1e-3);
+    }
 }
