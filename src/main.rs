@@ -142,11 +142,18 @@ fn main() -> ExitCode {
     }
 }
 
-fn load(scene: Option<&Path>) -> Result<SceneBuilder, CliError> {
+/// Loads SCENE (or the built-in Cornell box); returns the loader's warnings for printing.
+fn load(scene: Option<&Path>) -> Result<(SceneBuilder, Vec<String>), CliError> {
     Ok(match scene {
-        Some(p) => raypack::io::load_scene(p)?,
-        None => raypack::io::default_scene(),
+        Some(p) => raypack::io::load_scene_with_warnings(p)?,
+        None => (raypack::io::default_scene(), Vec::new()),
     })
+}
+
+fn print_warnings(warnings: &[String]) {
+    for w in warnings {
+        eprintln!("[raypack] warning: {w}");
+    }
 }
 
 fn commit(builder: SceneBuilder, opts: &BuildOptions) -> Scene {
@@ -187,8 +194,9 @@ fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
     pool.install(|| {
         eprint!("[raypack] Collecting primitives... ");
         let t = Instant::now();
-        let builder = load(a.scene.as_deref())?;
+        let (builder, warnings) = load(a.scene.as_deref())?;
         eprintln!("Done! ({:.4} sec)", t.elapsed().as_secs_f64());
+        print_warnings(&warnings);
         let opts = BuildOptions { quality: a.quality.into(), ..BuildOptions::default() };
         let scene = commit(builder, &opts);
         let aspect = width as f32 / height as f32;
@@ -245,8 +253,9 @@ fn progress_bar(len: usize) -> indicatif::ProgressBar {
 
 fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
     let t = Instant::now();
-    let builder = load(Some(&a.scene))?;
+    let (builder, warnings) = load(Some(&a.scene))?;
     let load_time = t.elapsed();
+    print_warnings(&warnings);
     println!("scene       {}", a.scene.display());
     println!("load        {:.4} s", load_time.as_secs_f64());
     for quality in [BuildQuality::Fast, BuildQuality::Medium, BuildQuality::High] {
