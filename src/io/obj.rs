@@ -18,6 +18,7 @@ pub fn parse_obj(
     path: &Path,
     read_mtl: &dyn Fn(&Path) -> Option<Vec<u8>>,
 ) -> Result<(SceneBuilder, Vec<String>), LoadError> {
+    check_faces(bytes, path)?;
     let opts = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     let mut warnings = Vec::new();
     let missing_mtl = std::cell::RefCell::new(Vec::new());
@@ -66,6 +67,24 @@ pub fn parse_obj(
             .map_err(|e| LoadError::parse(path, format!("object {:?}", model.name), e.to_string()))?;
     }
     Ok((b, warnings))
+}
+
+/// Rejects `f` statements with fewer than three corners, which `tobj` silently reads as points
+/// or lines: in OBJ they are malformed, and typically the last line of a truncated file.
+fn check_faces(bytes: &[u8], path: &Path) -> Result<(), LoadError> {
+    for (i, line) in bytes.split(|&b| b == b'\n').enumerate() {
+        if line.len() > 1 && line[0] == b'f' && line[1].is_ascii_whitespace() {
+            let corners = line[1..].split(|b| b.is_ascii_whitespace()).filter(|t| !t.is_empty()).count();
+            if corners < 3 {
+                return Err(LoadError::at_line(
+                    path,
+                    i + 1,
+                    format!("a face needs at least 3 corners, found {corners} (truncated file?)"),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Turns a `tobj` error into one that names the first offending line.
