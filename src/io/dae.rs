@@ -646,7 +646,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
         let mut tris = Vec::new();
         let mut emit =
             |p: Node, idx: &[u32], sizes: &mut dyn Iterator<Item = usize>, fan: bool| -> Result<(), LoadError> {
-                let need = |corners: usize| corners.checked_mul(stride).unwrap_or(usize::MAX);
+                let need = |corners: usize| corners.saturating_mul(stride);
                 let mut base = 0usize; // corner index
                 for (poly, n) in sizes.enumerate() {
                     if need(base.saturating_add(n)) > idx.len() {
@@ -927,5 +927,116 @@ fn without_path(e: LoadError) -> String {
     match e {
         LoadError::Parse { location, message, .. } => format!("{location}: {message}"),
         other => other.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A document with the given library contents and visual-scene nodes.
+    fn doc(libraries: &str, nodes: &str) -> String {
+        format!(
+            r##"<?xml version="1.0"?><COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">
+            {libraries}
+            <library_visual_scenes><visual_scene id="s">{nodes}</visual_scene></library_visual_scenes>
+            <scene><instance_visual_scene url="#s"/></scene></COLLADA>"##
+        )
+    }
+
+    fn load(text: &str) -> (SceneBuilder, Vec<String>) {
+        parse_dae(text, Path::new("t.dae"), &DaeOptions::default()).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    #[test]
+    fn lights_of_every_type_follow_cs184() {
+        let lib = r##"<library_lights>
+            <light id="p"><technique_common><point><color>1 2 3</color></point></technique_common></light>
+            <light id="d"><technique_common><directional><color>4 4 4</color></directional></technique_common></light>
+            <light id="a"><technique_common><ambient><color>0.5 0.5 0.5</color></ambient></technique_common></light>
+            <light id="sp"><technique_common><spot><color>7 7 7</color><falloff_angle>60</falloff_angle></spot></technique_common></light>
+            <light id="q"><technique_common><point><color>1 1 1</color></point></technique_common>
+              <extra><technique profile="CGL"><area><color>9 9 9</color></area></technique></extra></light>
+            </library_lights>"##;
+        let nodes = r##"<node id="np"><translate>1 2 3</translate><instance_light url="#p"/></node>
+            <node id="nd"><rotate>1 0 0 -90</rotate><instance_light url="#d"/></node>
+            <node id="na"><instance_light url="#a"/></node>
+            <node id="ns"><translate>0 5 0</translate><rotate>1 0 0 -90</rotate><instance_light url="#sp"/></node>
+            <node id="nq"><translate>0 2 0</translate><rotate>0 1 0 90</rotate><scale>2 3 1</scale><instance_light url="#q"/></node>"##;
+        let (b, _) = load(&doc(lib, nodes));
+        let l = b.lights();
+        assert_eq!(l[0], Light::Point { position: Vec3::new(1.0, 2.0, 3.0), intensity: Vec3::new(1.0, 2.0, 3.0) });
+        // -90° about x turns local -z into -y.
+        let Light::Directional { direction, radiance } = l[1] else { panic!("{:?}", l[1]) };
+        assert!((direction - -Vec3::Y).length() < 1e-6 && radiance == Vec3::splat(4.0));
+        assert_eq!(l[2], Light::Environment { radiance: Vec3::splat(0.5) });
+        let Light::Spot { position, direction, outer_angle_deg, .. } = l[3] else { panic!("{:?}", l[3]) };
+        assert!((position - Vec3::new(0.0, 5.0, 0.0)).length() < 1e-6 && (direction - -Vec3::Y).length() < 1e-6);
+        assert_eq!(outer_angle_deg, 30.0);
+        // Area: 90° about y maps x -> -z and z -> x; scale (2, 3, 1) first.
+        // direction = R·S·(0,0,-1) = R·(0,0,-1) = (-1,0,0); dim_x = R·S·(-1,0,0) = R·(-2,0,0) = (0,0,2);
+        // dim_y = R·S·(0,1,0) = (0,3,0).
+        let Light::Area { radiance, position, direction, dim_x, dim_y } = l[4] else { panic!("{:?}", l[4]) };
+        assert_eq!((radiance, position), (Vec3::splat(9.0), Vec3::new(0.0, 2.0, 0.0)));
+        assert!((direction - -Vec3::X).length() < 1e-6, "{direction}");
+        assert!((dim_x - Vec3::new(0.0, 0.0, 2.0)).length() < 1e-6, "{dim_x}");
+        assert!((dim_y - Vec3::new(0.0, 3.0, 0.0)).length() < 1e-6, "{dim_y}");
+    }
+
+    #[test]
+    fn cgl_materials_and_sphere_scale() {
+        let lib = r##"<library_effects>
+            <effect id="e-mf"><extra><technique profile="CGL"><microfacet><alpha>0.25</alpha><eta>0.2 0.3 0.4</eta><k>3 2 1</k></microfacet></technique></extra></effect>
+            <effect id="e-d"><profile_COMMON><technique sid="common"><blinn><diffuse><color>0.1 0.2 0.3 1</color></diffuse></blinn></technique></profile_COMMON>
+              <extra><technique profile="CGL"><refraction><transmittance>1 1 1</transmittance><roughness>0</roughness><ior>1.33</ior></refraction></technique></extra></effect>
+            </library_effects>
+            <library_materials><material id="mf"><instance_effect url="#e-mf"/></material><material id="d"><instance_effect url="#e-d"/></material></library_materials>
+            <library_geometries><geometry id="ball"><extra><technique profile="CGL"><sphere><radius>0.5</radius></sphere></technique></extra></geometry></library_geometries>"##;
+        let nodes = r##"<node id="a"><translate>1 0 0</translate><scale>4 4 4</scale><instance_geometry url="#ball">
+              <bind_material><technique_common><instance_material symbol="x" target="#mf"/></technique_common></bind_material></instance_geometry></node>
+            <node id="b"><instance_geometry url="#ball">
+              <bind_material><technique_common><instance_material symbol="y" target="#d"/></technique_common></bind_material></instance_geometry></node>"##;
+        let (b, _) = load(&doc(lib, nodes));
+        let (scene, _) = b.commit(&crate::BuildOptions::default());
+        assert_eq!(scene.spheres.center, vec![Vec3::new(1.0, 0.0, 0.0), Vec3::ZERO]);
+        assert_eq!(scene.spheres.radius, vec![2.0, 0.5]);
+        let m0 = &scene.materials[scene.spheres.material[0] as usize];
+        assert_eq!(
+            m0.bsdf,
+            Bsdf::Microfacet { eta: Vec3::new(0.2, 0.3, 0.4), k: Vec3::new(3.0, 2.0, 1.0), alpha: 0.25 }
+        );
+        let m1 = &scene.materials[scene.spheres.material[1] as usize];
+        assert!(matches!(m1.bsdf, Bsdf::Glass { ior, reflectance, .. } if ior == 1.33 && reflectance == Vec3::ZERO));
+    }
+
+    #[test]
+    fn camera_fields_of_view_and_placements() {
+        let lib = |persp: &str| {
+            format!(
+                r##"<library_cameras><camera id="c"><optics><technique_common><perspective>{persp}</perspective></technique_common></optics></camera></library_cameras>
+              <library_geometries><geometry id="g"><mesh><source id="p"><float_array id="pa" count="9">-1 -1 0 1 -1 0 0 1 0</float_array></source>
+              <vertices id="v"><input semantic="POSITION" source="#p"/></vertices>
+              <triangles count="1"><input semantic="VERTEX" source="#v" offset="0"/><p>0 1 2</p></triangles></mesh></geometry></library_geometries>"##
+            )
+        };
+        let nodes = r##"<node id="cam"><translate>0 0 10</translate><instance_camera url="#c"/></node><node id="m"><instance_geometry url="#g"/></node>"##;
+        // yfov and aspect without xfov: hFov from the aspect.
+        let (b, _) =
+            load(&doc(&lib("<yfov>40</yfov><aspect_ratio>2</aspect_ratio><znear>1</znear><zfar>50</zfar>"), nodes));
+        let c = b.camera().unwrap();
+        let want_h = (2.0 * ((20f32).to_radians().tan() * 2.0).atan()).to_degrees();
+        assert!((c.vfov_deg - 40.0).abs() < 1e-5 && (c.hfov_deg - want_h).abs() < 1e-4);
+        assert_eq!((c.near, c.far), (1.0, 50.0));
+        // CS184 placement: c_dir = unit((0,0,10) + (0,0,-1)) = +z; bounds [-1,1]x[-1,1]x[0,0]:
+        // centre 0, distance 1.5 |(2,2,0)|.
+        assert!((c.position - Vec3::new(0.0, 0.0, 1.5 * 8f32.sqrt())).length() < 1e-5, "{}", c.position);
+        // As authored: the file's eye.
+        let text = doc(&lib("<xfov>50</xfov><yfov>40</yfov>"), nodes);
+        let opts = DaeOptions { camera: CameraPlacement::AsAuthored };
+        let (b, _) = parse_dae(&text, Path::new("t.dae"), &opts).unwrap();
+        assert_eq!(b.camera().unwrap().position, Vec3::new(0.0, 0.0, 10.0));
+        // Neither yfov nor aspect: CS184 rejects it too.
+        let e = parse_dae(&doc(&lib("<xfov>50</xfov>"), nodes), Path::new("t.dae"), &opts).unwrap_err();
+        assert!(e.to_string().contains("<camera id=\"c\">/<optics>/<technique_common>/<perspective>"), "{e}");
     }
 }
