@@ -22,12 +22,16 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod bench;
 pub mod bvh;
+#[cfg(feature = "embree")]
+pub mod embree;
 pub mod generate;
 pub mod geometry;
 pub mod io;
 pub mod math;
 pub mod ray;
+pub mod raysets;
 pub mod render;
 pub mod scene;
 

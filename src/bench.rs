@@ -1,0 +1,578 @@
+//! `raypack bench`: times raypack's kernels (and, with `--against embree`, Embree's calls) on
+//! the standard ray sets of [`crate::raysets`], over one thread and all threads.
+//!
+//! Every method has the same contract: a slice of [`Ray`]s in, a slice of [`Hit`]s (or
+//! occlusion flags) out. Rays are spread over threads in contiguous chunks of whole 4×4
+//! tiles ([`CHUNK`] rays). Each method runs once to warm up and to validate its checksum
+//! against the reference, then `runs` times; the median time is reported.
+//!
+//! The raypack side is the table [`RAYPACK_KERNELS`]: adding a kernel there adds it to the
+//! benchmark, to the criterion bench and to the Embree cross-check test.
+
+use crate::bvh::Bvh2Node;
+use crate::ray::{Hit, Ray};
+use crate::raysets::{self, Checksum};
+use crate::scene::Scene;
+use rayon::prelude::*;
+use std::time::{Duration, Instant};
+
+/// Rays per work item when tracing on several threads: 64 tiles of 4×4.
+pub const CHUNK: usize = 1024;
+
+/// A raypack closest-hit kernel over a slice of rays.
+pub type IntersectKernel = fn(&Scene, &[Ray], &mut [Hit]);
+/// A raypack occlusion kernel over a slice of rays.
+pub type OccludedKernel = fn(&Scene, &[Ray], &mut [bool]);
+
+/// A raypack kernel of either query.
+#[derive(Clone, Copy, Debug)]
+pub enum Kernel {
+    /// Closest hit.
+    Intersect(IntersectKernel),
+    /// Any hit.
+    Occluded(OccludedKernel),
+}
+
+/// A named raypack kernel.
+#[derive(Clone, Copy, Debug)]
+pub struct RaypackKernel {
+    /// Name in tables and JSON.
+    pub name: &'static str,
+    /// The kernel.
+    pub kernel: Kernel,
+}
+
+fn reference_intersect1(scene: &Scene, rays: &[Ray], hits: &mut [Hit]) {
+    for (r, h) in rays.iter().zip(hits) {
+        *h = scene.intersect1_reference(r);
+    }
+}
+
+fn reference_occluded1(scene: &Scene, rays: &[Ray], out: &mut [bool]) {
+    for (r, o) in rays.iter().zip(out) {
+        *o = scene.occluded1_reference(r);
+    }
+}
+
+fn scene_intersect1(scene: &Scene, rays: &[Ray], hits: &mut [Hit]) {
+    for (r, h) in rays.iter().zip(hits) {
+        *h = scene.intersect1(r);
+    }
+}
+
+fn scene_occluded1(scene: &Scene, rays: &[Ray], out: &mut [bool]) {
+    for (r, o) in rays.iter().zip(out) {
+        *o = scene.occluded1(r);
+    }
+}
+
+/// Every raypack kernel that benchmarks time and the Embree cross-check verifies. One line
+/// per kernel; packet kernels receive consecutive rays (4×4 tiles for primary rays).
+pub const RAYPACK_KERNELS: &[RaypackKernel] = &[
+    RaypackKernel { name: "bvh2 reference intersect1", kernel: Kernel::Intersect(reference_intersect1) },
+    RaypackKernel { name: "bvh2 reference occluded1", kernel: Kernel::Occluded(reference_occluded1) },
+    RaypackKernel { name: "Scene::intersect1", kernel: Kernel::Intersect(scene_intersect1) },
+    RaypackKernel { name: "Scene::occluded1", kernel: Kernel::Occluded(scene_occluded1) },
+];
+
+/// Bytes of raypack's acceleration structure over `scene` (nodes and primitive-id arrays;
+/// the triangles themselves live in the scene store and are not counted).
+pub fn raypack_accel_bytes(scene: &Scene) -> usize {
+    let bvh = scene.bvh2();
+    bvh.nodes.len() * std::mem::size_of::<Bvh2Node>() + bvh.prim_ids.len() * std::mem::size_of::<u32>()
+}
+
+/// A traceable method of either tracer, bound to its scene.
+pub struct Method<'a> {
+    /// `raypack` or `embree`.
+    pub tracer: &'static str,
+    /// Method name, e.g. `rtcIntersect16 coherent (high)`.
+    pub name: String,
+    /// What it runs.
+    pub run: Run<'a>,
+}
+
+/// A bound closest-hit or occlusion function.
+pub enum Run<'a> {
+    /// Closest hit of each ray.
+    Intersect(Box<dyn Fn(&[Ray], &mut [Hit]) + Sync + 'a>),
+    /// Occlusion of each ray.
+    Occluded(Box<dyn Fn(&[Ray], &mut [bool]) + Sync + 'a>),
+}
+
+impl Run<'_> {
+    /// True for occlusion queries.
+    pub fn is_occlusion(&self) -> bool {
+        matches!(self, Run::Occluded(_))
+    }
+}
+
+/// [`RAYPACK_KERNELS`] bound to `scene`.
+pub fn raypack_methods(scene: &Scene) -> Vec<Method<'_>> {
+    RAYPACK_KERNELS
+        .iter()
+        .map(|k| Method {
+            tracer: "raypack",
+            name: k.name.to_string(),
+            run: match k.kernel {
+                Kernel::Intersect(f) => Run::Intersect(Box::new(move |r, h| f(scene, r, h))),
+                Kernel::Occluded(f) => Run::Occluded(Box::new(move |r, o| f(scene, r, o))),
+            },
+        })
+        .collect()
+}
+
+/// Embree's calls on `e`: `rtcIntersect1/8/16`, `rtcOccluded1/8/16`, and the 8- and 16-wide
+/// packet calls again with `RTC_INTERSECT_CONTEXT_FLAG_COHERENT`. `suffix` (e.g. ` (high)`)
+/// is appended to every name.
+#[cfg(feature = "embree")]
+pub fn embree_methods<'a>(e: &'a crate::embree::EmbreeScene, suffix: &str) -> Vec<Method<'a>> {
+    use crate::embree::EmbreeWidth::{W1, W8, W16};
+    let mut out = Vec::new();
+    for (width, coherent) in [(W1, false), (W8, false), (W16, false), (W8, true), (W16, true)] {
+        let tag = if coherent { " coherent" } else { "" };
+        let lanes = width.lanes();
+        out.push(Method {
+            tracer: "embree",
+            name: format!("rtcIntersect{lanes}{tag}{suffix}"),
+            run: Run::Intersect(Box::new(move |r, h| e.intersect(width, coherent, r, h))),
+        });
+        out.push(Method {
+            tracer: "embree",
+            name: format!("rtcOccluded{lanes}{tag}{suffix}"),
+            run: Run::Occluded(Box::new(move |r, o| e.occluded(width, coherent, r, o))),
+        });
+    }
+    out
+}
+
+/// The results of one method on one ray set.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Output {
+    /// Closest hits.
+    Hits(Vec<Hit>),
+    /// Occlusion flags.
+    Occluded(Vec<bool>),
+}
+
+impl Output {
+    /// The checksum of these results for `rays`.
+    pub fn checksum(&self, rays: &[Ray]) -> Checksum {
+        match self {
+            Output::Hits(h) => Checksum::of_hits(h),
+            Output::Occluded(o) => Checksum::of_occlusion(rays, o),
+        }
+    }
+}
+
+/// An output buffer of the right kind for `run`.
+pub fn output_for(run: &Run<'_>, n: usize) -> Output {
+    match run {
+        Run::Intersect(_) => Output::Hits(vec![Hit::MISS; n]),
+        Run::Occluded(_) => Output::Occluded(vec![false; n]),
+    }
+}
+
+/// Traces `rays` with `run` into `out` on the current rayon pool, in contiguous chunks of
+/// [`CHUNK`] rays.
+///
+/// # Panics
+/// When `out` is of the other query kind or shorter than `rays`.
+pub fn trace(run: &Run<'_>, rays: &[Ray], out: &mut Output) {
+    match (run, out) {
+        (Run::Intersect(f), Output::Hits(h)) => {
+            rays.par_chunks(CHUNK).zip(h.par_chunks_mut(CHUNK)).for_each(|(r, h)| f(r, h))
+        }
+        (Run::Occluded(f), Output::Occluded(o)) => {
+            rays.par_chunks(CHUNK).zip(o.par_chunks_mut(CHUNK)).for_each(|(r, o)| f(r, o))
+        }
+        _ => panic!("output buffer does not match the query"),
+    }
+}
+
+/// Why `raypack bench` could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    /// `--against embree` in a build without the `embree` feature.
+    #[error(
+        "--against embree: this raypack was built without Embree; rebuild with `cargo build --release --features embree` (needs the system package libembree-dev)"
+    )]
+    EmbreeNotBuilt,
+    /// Embree refused the scene.
+    #[cfg(feature = "embree")]
+    #[error("Embree: {0}")]
+    Embree(#[from] crate::embree::EmbreeError),
+    /// Bad settings.
+    #[error("{0}")]
+    Settings(String),
+    /// Writing the JSON report failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+}
+
+/// What to run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BenchSettings {
+    /// Primary-ray image width.
+    pub width: usize,
+    /// Primary-ray image height.
+    pub height: usize,
+    /// Timed runs per method (the median is reported), after one warm-up run.
+    pub runs: usize,
+    /// Also trace with Embree (needs the `embree` feature).
+    pub against_embree: bool,
+    /// Thread counts to run at; `0` means all threads of the machine.
+    pub threads: Vec<usize>,
+    /// Seed of the diffuse bounces.
+    pub seed: u64,
+}
+
+impl Default for BenchSettings {
+    fn default() -> Self {
+        Self { width: 1024, height: 768, runs: 5, against_embree: false, threads: vec![1, 0], seed: 1 }
+    }
+}
+
+/// Build time and size of one acceleration structure.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BuildFigures {
+    /// `raypack` or `embree`.
+    pub tracer: &'static str,
+    /// What was built, e.g. `bvh2 medium` or `medium`.
+    pub quality: String,
+    /// Wall-clock build time on all threads.
+    pub seconds: f64,
+    /// Bytes of the acceleration structure.
+    pub bytes: u64,
+}
+
+/// One row of results.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BenchRow {
+    /// Ray set name.
+    pub rays: &'static str,
+    /// Rays in the set.
+    pub ray_count: usize,
+    /// `raypack` or `embree`.
+    pub tracer: &'static str,
+    /// Method name.
+    pub method: String,
+    /// Threads used.
+    pub threads: usize,
+    /// Million rays per second (median run).
+    pub mrays_per_s: f64,
+    /// Checksum of the results.
+    pub checksum: Checksum,
+    /// True when the checksum differs from the reference's by more than `1e-5` of the rays.
+    pub checksum_differs: bool,
+}
+
+/// Everything `raypack bench` measured.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BenchReport {
+    /// Scene name.
+    pub scene: String,
+    /// Triangles traced.
+    pub triangles: usize,
+    /// Primary-ray resolution.
+    pub resolution: (usize, usize),
+    /// Timed runs per method.
+    pub runs: usize,
+    /// Notes on the setup (Embree version, native packet widths).
+    pub notes: Vec<String>,
+    /// Build figures of every structure.
+    pub build: Vec<BuildFigures>,
+    /// Results.
+    pub rows: Vec<BenchRow>,
+}
+
+fn median(mut xs: Vec<Duration>) -> Duration {
+    xs.sort();
+    xs[xs.len() / 2]
+}
+
+/// Times every method on every ray set at every thread count. `scene` was built by the
+/// caller in `raypack_build` (timed there); `log` receives progress lines.
+pub fn run_bench(
+    name: &str,
+    scene: &Scene,
+    raypack_build: BuildFigures,
+    settings: &BenchSettings,
+    log: &mut dyn FnMut(&str),
+) -> Result<BenchReport, BenchError> {
+    if settings.width == 0 || settings.height == 0 || settings.runs == 0 {
+        return Err(BenchError::Settings("resolution and run count must be positive".into()));
+    }
+    #[cfg(not(feature = "embree"))]
+    if settings.against_embree {
+        return Err(BenchError::EmbreeNotBuilt);
+    }
+    let mut report = BenchReport {
+        scene: name.to_string(),
+        triangles: scene.num_triangles(),
+        resolution: (settings.width, settings.height),
+        runs: settings.runs,
+        notes: Vec::new(),
+        build: vec![raypack_build],
+        rows: Vec::new(),
+    };
+
+    #[cfg(feature = "embree")]
+    let embree_scenes = if settings.against_embree {
+        use crate::embree::{EmbreeQuality, EmbreeScene, EmbreeWidth};
+        let mut v = Vec::new();
+        for q in [EmbreeQuality::Medium, EmbreeQuality::High] {
+            log(&format!("building Embree BVH ({})", q.name()));
+            let e = EmbreeScene::new(scene, q)?;
+            report.build.push(BuildFigures {
+                tracer: "embree",
+                quality: q.name().to_string(),
+                seconds: e.build_time().as_secs_f64(),
+                bytes: e.bvh_bytes(),
+            });
+            v.push(e);
+        }
+        let e = &v[0];
+        report.notes.push(format!(
+            "Embree {}: native 8-wide packets {}, 16-wide {}",
+            e.version(),
+            if e.native_packets(EmbreeWidth::W8) { "yes" } else { "no (emulated)" },
+            if e.native_packets(EmbreeWidth::W16) { "yes" } else { "no (emulated)" },
+        ));
+        v
+    } else {
+        Vec::new()
+    };
+
+    #[cfg_attr(not(feature = "embree"), allow(unused_mut))]
+    let mut methods = raypack_methods(scene);
+    #[cfg(feature = "embree")]
+    for e in &embree_scenes {
+        methods.extend(embree_methods(e, &format!(" ({})", e.options().quality.name())));
+    }
+
+    log(&format!("making ray sets at {}x{}", settings.width, settings.height));
+    let sets = raysets::bench_sets(scene, settings.width, settings.height, settings.seed);
+    let all = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
+    for set in &sets {
+        let occlusion = set.kind.is_occlusion();
+        let reference = methods
+            .iter()
+            .find(|m| m.run.is_occlusion() == occlusion)
+            .expect("RAYPACK_KERNELS has a kernel of each query");
+        let mut ref_out = output_for(&reference.run, set.rays.len());
+        trace(&reference.run, &set.rays, &mut ref_out);
+        let ref_sum = ref_out.checksum(&set.rays);
+        for &t in &settings.threads {
+            let threads = if t == 0 { all } else { t };
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .map_err(|e| BenchError::Settings(e.to_string()))?;
+            for m in methods.iter().filter(|m| m.run.is_occlusion() == occlusion) {
+                let mut out = output_for(&m.run, set.rays.len());
+                let times = pool.install(|| {
+                    trace(&m.run, &set.rays, &mut out); // warm-up
+                    (0..settings.runs)
+                        .map(|_| {
+                            let t0 = Instant::now();
+                            trace(&m.run, &set.rays, &mut out);
+                            t0.elapsed()
+                        })
+                        .collect::<Vec<_>>()
+                });
+                let checksum = out.checksum(&set.rays);
+                let allowed = (set.rays.len() as f64 * 1e-5).max(0.0);
+                let checksum_differs = (checksum.hits as f64 - ref_sum.hits as f64).abs() > allowed;
+                let med = median(times).as_secs_f64().max(1e-12);
+                let row = BenchRow {
+                    rays: set.kind.name(),
+                    ray_count: set.rays.len(),
+                    tracer: m.tracer,
+                    method: m.name.clone(),
+                    threads,
+                    mrays_per_s: set.rays.len() as f64 / med / 1e6,
+                    checksum,
+                    checksum_differs,
+                };
+                log(&format!(
+                    "{:<8} {} threads {:<8} {:<34} {:>9.3} Mrays/s",
+                    row.rays, threads, row.tracer, row.method, row.mrays_per_s
+                ));
+                report.rows.push(row);
+            }
+        }
+    }
+    Ok(report)
+}
+
+impl BenchReport {
+    /// The best Embree speed on the same ray set and thread count as `row`.
+    pub fn embree_best(&self, rays: &str, threads: usize) -> Option<f64> {
+        self.rows
+            .iter()
+            .filter(|r| r.tracer == "embree" && r.rays == rays && r.threads == threads)
+            .map(|r| r.mrays_per_s)
+            .fold(None, |a, x| Some(a.map_or(x, |a: f64| a.max(x))))
+    }
+
+    /// The report as a plain-text table.
+    pub fn table(&self) -> String {
+        use std::fmt::Write;
+        let mut s = String::new();
+        let tri = self.triangles.max(1) as f64;
+        let _ = writeln!(s, "scene      {} ({} triangles)", self.scene, self.triangles);
+        let _ = writeln!(
+            s,
+            "rays       primary {}x{} in 4x4 tiles, diffuse and shadow from its hits; median of {} runs",
+            self.resolution.0, self.resolution.1, self.runs
+        );
+        for n in &self.notes {
+            let _ = writeln!(s, "note       {n}");
+        }
+        for b in &self.build {
+            let _ = writeln!(
+                s,
+                "build      {:<8} {:<12} {:>9.4} s  {:>12} bytes  {:>7.1} bytes/triangle",
+                b.tracer,
+                b.quality,
+                b.seconds,
+                b.bytes,
+                b.bytes as f64 / tri
+            );
+        }
+        let _ = writeln!(
+            s,
+            "\n{:<8} {:>8} {:>3} {:<8} {:<34} {:>9} {:>7} {:>9} {:>18}",
+            "rays", "count", "thr", "tracer", "method", "Mrays/s", "ratio", "hits", "t-sum"
+        );
+        for r in &self.rows {
+            let ratio = match self.embree_best(r.rays, r.threads) {
+                Some(best) if best > 0.0 => format!("{:.2}x", r.mrays_per_s / best),
+                _ => "-".to_string(),
+            };
+            let _ = writeln!(
+                s,
+                "{:<8} {:>8} {:>3} {:<8} {:<34} {:>9.3} {:>7} {:>9} {:>18.10e}{}",
+                r.rays,
+                r.ray_count,
+                r.threads,
+                r.tracer,
+                r.method,
+                r.mrays_per_s,
+                ratio,
+                r.checksum.hits,
+                r.checksum.t_sum,
+                if r.checksum_differs { "  CHECKSUM DIFFERS FROM REFERENCE" } else { "" }
+            );
+        }
+        let _ = writeln!(s, "ratio: Mrays/s over the best Embree method on the same rays and threads");
+        s
+    }
+
+    /// The report as one JSON document:
+    /// `{"scene", "triangles", "build": {...}, "results": [{"rays", "tracer", "method",
+    /// "threads", "mrays_per_s", "hits", "t_sum"}]}`.
+    pub fn json(&self) -> serde_json::Value {
+        use serde_json::{Map, Value, json};
+        let mut build = Map::new();
+        for b in &self.build {
+            build.insert(
+                format!("{} {}", b.tracer, b.quality),
+                json!({
+                    "tracer": b.tracer,
+                    "quality": b.quality,
+                    "seconds": b.seconds,
+                    "bytes": b.bytes,
+                    "bytes_per_triangle": b.bytes as f64 / self.triangles.max(1) as f64,
+                }),
+            );
+        }
+        let results: Vec<Value> = self
+            .rows
+            .iter()
+            .map(|r| {
+                json!({
+                    "rays": r.rays,
+                    "ray_count": r.ray_count,
+                    "tracer": r.tracer,
+                    "method": r.method,
+                    "threads": r.threads,
+                    "mrays_per_s": r.mrays_per_s,
+                    "hits": r.checksum.hits,
+                    "t_sum": r.checksum.t_sum,
+                })
+            })
+            .collect();
+        json!({
+            "scene": self.scene,
+            "triangles": self.triangles,
+            "resolution": [self.resolution.0, self.resolution.1],
+            "runs": self.runs,
+            "notes": self.notes,
+            "build": build,
+            "results": results,
+        })
+    }
+}
+
+/// Writes `text` to `path` atomically (a temporary file in the same directory, then a rename).
+pub fn write_atomically(path: &std::path::Path, text: &str) -> Result<(), BenchError> {
+    let io = |source| BenchError::Io { path: path.to_path_buf(), source };
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+    let name = path.file_name().ok_or_else(|| io(std::io::Error::other("not a file name")))?;
+    let tmp = dir.join(format!(".{}.tmp{}", name.to_string_lossy(), std::process::id()));
+    std::fs::write(&tmp, text).map_err(io)?;
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        io(e)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::generate::uv_sphere;
+    use crate::{BuildOptions, Material, SceneBuilder};
+
+    #[test]
+    fn bench_runs_every_kernel_and_checksums_agree() {
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::default());
+        let s = uv_sphere(16, 24);
+        b.add_mesh(&s.positions, &s.indices, m).unwrap();
+        let (scene, _) = b.commit(&BuildOptions::default());
+        let build = BuildFigures { tracer: "raypack", quality: "medium".into(), seconds: 0.0, bytes: 0 };
+        let settings = BenchSettings { width: 32, height: 24, runs: 1, threads: vec![1, 2], ..Default::default() };
+        let report = run_bench("sphere", &scene, build, &settings, &mut |_| {}).unwrap();
+        // 3 sets x 2 thread counts x the kernels of the matching query.
+        let per_query =
+            |occ: bool| RAYPACK_KERNELS.iter().filter(move |k| matches!(k.kernel, Kernel::Occluded(_)) == occ);
+        assert_eq!(report.rows.len(), 2 * (2 * per_query(false).count() + per_query(true).count()));
+        assert!(report.rows.iter().all(|r| !r.checksum_differs));
+        let primary = report.rows.iter().find(|r| r.rays == "primary").unwrap();
+        assert_eq!(primary.ray_count, 32 * 24);
+        assert!(primary.checksum.hits > 100 && primary.checksum.t_sum > 0.0);
+        let json = report.json();
+        assert_eq!(json["triangles"], scene.num_triangles());
+        assert_eq!(json["results"].as_array().unwrap().len(), report.rows.len());
+        assert!(json["results"][0]["mrays_per_s"].as_f64().unwrap() > 0.0);
+        assert!(report.table().contains("bvh2 reference intersect1"));
+    }
+
+    #[cfg(not(feature = "embree"))]
+    #[test]
+    fn against_embree_without_the_feature_is_a_clear_error() {
+        let (scene, _) = SceneBuilder::new().commit(&BuildOptions::default());
+        let build = BuildFigures { tracer: "raypack", quality: "medium".into(), seconds: 0.0, bytes: 0 };
+        let settings = BenchSettings { against_embree: true, ..Default::default() };
+        let err = run_bench("empty", &scene, build, &settings, &mut |_| {}).unwrap_err();
+        assert!(matches!(err, BenchError::EmbreeNotBuilt));
+        assert!(err.to_string().contains("--features embree"));
+    }
+}
