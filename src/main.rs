@@ -24,6 +24,36 @@ enum Command {
     Render(RenderArgs),
     /// Load a scene, build its BVH and print statistics.
     Info(InfoArgs),
+    /// Time raypack's kernels (and Embree's, with --against embree) on primary, diffuse
+    /// and shadow rays.
+    Bench(BenchArgs),
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum AgainstArg {
+    /// Intel Embree 3 (needs a build with `--features embree`).
+    Embree,
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    /// Scene file (.dae, .obj, .ply).
+    scene: PathBuf,
+    /// Also trace the same rays with another tracer.
+    #[arg(long, value_enum)]
+    against: Option<AgainstArg>,
+    /// Write the figures as JSON to this file (`-` for standard output).
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Primary-ray image size.
+    #[arg(short = 'r', long = "resolution", num_args = 2, value_names = ["WIDTH", "HEIGHT"], default_values_t = [1024, 768])]
+    resolution: Vec<usize>,
+    /// Timed runs per method (the median is reported), after one warm-up run.
+    #[arg(long, default_value_t = 5)]
+    runs: usize,
+    /// raypack's BVH build effort.
+    #[arg(long, value_enum, default_value_t = QualityArg::Medium)]
+    quality: QualityArg,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -110,6 +140,8 @@ enum CliError {
     Load(#[from] LoadError),
     #[error(transparent)]
     Image(#[from] render::ImageError),
+    #[error(transparent)]
+    Bench(#[from] raypack::bench::BenchError),
     #[error("{0}")]
     Usage(String),
 }
@@ -117,7 +149,7 @@ enum CliError {
 fn main() -> ExitCode {
     let mut args: Vec<std::ffi::OsString> = std::env::args_os().collect();
     // CS184 style: `raypack scene.dae -t 8 ...` means `raypack render scene.dae -t 8 ...`.
-    let known = ["render", "info", "help", "-h", "--help", "-V", "--version"];
+    let known = ["render", "info", "bench", "help", "-h", "--help", "-V", "--version"];
     if args.len() > 1 && !known.iter().any(|k| args[1] == *k) {
         args.insert(1, "render".into());
     }
@@ -132,6 +164,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Render(a) => cmd_render(a),
         Command::Info(a) => cmd_info(a),
+        Command::Bench(a) => cmd_bench(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -290,6 +323,47 @@ fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
                 Err(e) => return Err(CliError::Usage(format!("BVH invalid: {e}"))),
             }
         }
+    }
+    Ok(())
+}
+
+fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
+    use raypack::bench::{BenchSettings, BuildFigures, raypack_accel_bytes, run_bench, write_atomically};
+    let (width, height) = (a.resolution[0], a.resolution[1]);
+    if width == 0 || height == 0 || width > 1 << 15 || height > 1 << 15 {
+        return Err(CliError::Usage(format!("-r {width} {height}: width and height must be between 1 and 32768")));
+    }
+    if a.runs == 0 {
+        return Err(CliError::Usage("--runs 0: need at least one timed run".into()));
+    }
+    let settings =
+        BenchSettings { width, height, runs: a.runs, against_embree: a.against.is_some(), ..Default::default() };
+    if settings.against_embree && !cfg!(feature = "embree") {
+        return Err(raypack::bench::BenchError::EmbreeNotBuilt.into());
+    }
+    let builder = load(Some(&a.scene))?;
+    let quality: BuildQuality = a.quality.into();
+    let t = Instant::now();
+    let (scene, report) = builder.commit(&BuildOptions { quality, ..BuildOptions::default() });
+    let seconds = t.elapsed().as_secs_f64();
+    if report.dropped() > 0 {
+        eprintln!("[raypack] warning: {report}");
+    }
+    let build = BuildFigures {
+        tracer: "raypack",
+        quality: format!("bvh2 {}", format!("{quality:?}").to_lowercase()),
+        seconds,
+        bytes: raypack_accel_bytes(&scene) as u64,
+    };
+    let name = a.scene.display().to_string();
+    let out = run_bench(&name, &scene, build, &settings, &mut |line| eprintln!("[raypack] {line}"))?;
+    match a.json.as_deref() {
+        Some(p) if p == Path::new("-") => println!("{:#}", out.json()),
+        Some(p) => {
+            write_atomically(p, &format!("{:#}\n", out.json()))?;
+            print!("{}", out.table());
+        }
+        None => print!("{}", out.table()),
     }
     Ok(())
 }
