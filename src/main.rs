@@ -341,7 +341,8 @@ fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     if settings.against_embree && !cfg!(feature = "embree") {
         return Err(raypack::bench::BenchError::EmbreeNotBuilt.into());
     }
-    let builder = load(Some(&a.scene))?;
+    let (builder, warnings) = load(Some(&a.scene))?;
+    print_warnings(&warnings);
     let quality: BuildQuality = a.quality.into();
     let t = Instant::now();
     let (scene, report) = builder.commit(&BuildOptions { quality, ..BuildOptions::default() });

@@ -25,7 +25,6 @@ use rayon::prelude::*;
 use raypack::bench::{Method, Output, embree_methods, output_for, raypack_methods, trace};
 use raypack::embree::{EmbreeOptions, EmbreeQuality, EmbreeScene};
 use raypack::generate::{Mesh, grid, random_soup, uv_sphere};
-use raypack::io::LoadError;
 use raypack::raysets::{self, RaySet, RaySetKind};
 use raypack::render::sampler::Rng;
 use raypack::{BuildOptions, Hit, Material, Ray, Scene, SceneBuilder, Vec3};
@@ -516,14 +515,7 @@ fn third_party_scenes_agree_with_embree() {
     let mut total = 0;
     for (file, res) in files {
         let path = root.join(&file);
-        let builder = match raypack::io::load_scene(Path::new(&path)) {
-            Ok(b) => b,
-            Err(e @ LoadError::UnsupportedFormat { .. }) => {
-                eprintln!("SKIPPED crosscheck of {file}: the loader is not available yet ({e})");
-                continue;
-            }
-            Err(e) => panic!("{file}: {e}"),
-        };
+        let builder = raypack::io::load_scene(Path::new(&path)).unwrap_or_else(|e| panic!("{file}: {e}"));
         let (scene, _) = builder.commit(&BuildOptions::default());
         let scene = triangles_only(&scene);
         let sets = ray_sets(&scene, res, 60_000, 30_000);
