@@ -177,7 +177,14 @@ fn crossings(scene: &Scene, ray: &Ray) -> Vec<Crossing> {
         let n = (bb - a).cross(c - a);
         let nlen = n.length();
         let denom = n.dot(d);
-        if nlen == 0.0 || denom == 0.0 {
+        if nlen == 0.0 {
+            continue;
+        }
+        if let Some(c) = coplanar_crossing(i as u32, [a, bb, c], n, ray) {
+            out.push(c);
+            continue;
+        }
+        if denom == 0.0 {
             continue;
         }
         let t = n.dot(a - o) / denom;
@@ -215,6 +222,52 @@ fn crossings(scene: &Scene, ray: &Ray) -> Vec<Crossing> {
     }
     out.sort_by(|x, y| x.t.total_cmp(&y.t));
     out
+}
+
+/// A ray that lies in the triangle's plane up to float rounding meets it, if at all, along a
+/// segment; where along it is decided by rounding alone (Möller–Trumbore divides two
+/// rounding errors there, Embree's plane test likewise). Such a triangle is an ambiguous
+/// crossing anywhere over its extent along the ray, provided the ray's line passes within
+/// float tolerance of one of its edges. `None` when the ray is not (nearly) coplanar.
+fn coplanar_crossing(prim: u32, v: [DVec3; 3], n: DVec3, ray: &Ray) -> Option<Crossing> {
+    let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
+    let (dlen, nlen) = (d.length(), n.length());
+    let mag = v.iter().chain([&o]).map(|p| p.abs().max_element()).fold(0.0, f64::max);
+    let eps = f32::EPSILON as f64;
+    // Distance of the origin from the plane, and the sine of the ray's angle to it.
+    let dist = n.dot(v[0] - o).abs() / nlen;
+    let sin = n.dot(d).abs() / (nlen * dlen);
+    let diameter = (v[0] - v[1]).length().max((v[1] - v[2]).length()).max((v[2] - v[0]).length());
+    let tol = 64.0 * eps * mag;
+    // Nearly coplanar: over the triangle's extent the ray stays within tolerance of the plane.
+    let reach = v.iter().map(|p| (*p - o).length()).fold(0.0, f64::max);
+    if dist > tol + sin * reach || sin * (reach + diameter) > tol {
+        return None;
+    }
+    // The line must come within tolerance of the triangle: of one of its edges.
+    let line_segment = |p: DVec3, q: DVec3| {
+        let u = d / dlen;
+        let e = q - p;
+        let w = p - o;
+        let (b, c, dd, ee) = (u.dot(e), e.dot(e), u.dot(w), e.dot(w));
+        let den = c - b * b;
+        let s = if den > 1e-30 { ((b * dd - ee) / den).clamp(0.0, 1.0) } else { 0.0 };
+        let x = p + e * s;
+        let along = (x - o).dot(u);
+        (x - (o + u * along)).length()
+    };
+    let near = [(v[0], v[1]), (v[1], v[2]), (v[2], v[0])].iter().any(|&(p, q)| line_segment(p, q) <= tol);
+    if !near {
+        return None;
+    }
+    let ts: Vec<f64> = v.iter().map(|p| (*p - o).dot(d) / (dlen * dlen)).collect();
+    let (lo, hi) =
+        (ts.iter().copied().fold(f64::INFINITY, f64::min), ts.iter().copied().fold(f64::NEG_INFINITY, f64::max));
+    let t_tol = 0.5 * (hi - lo) + (diameter + tol) / dlen;
+    if hi + t_tol < ray.tnear as f64 || lo - t_tol > ray.tfar as f64 {
+        return None;
+    }
+    Some(Crossing { prim, t: 0.5 * (lo + hi), ambiguous: true, t_tol })
 }
 
 /// The `t` of the first crossing that no float error can remove, or infinity.
