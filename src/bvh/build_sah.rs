@@ -15,7 +15,7 @@
 //! tree is bit-identical whatever the thread count.
 
 use crate::bvh::{Bvh2, Bvh2Node, MAX_DEPTH};
-use crate::math::{Aabb, Vec3};
+use crate::math::{Aabb, Vec3, Vec3A};
 
 /// How much effort the builder spends on tree quality.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -123,7 +123,7 @@ pub fn build_bvh2(prims: &mut [BuildPrim], opts: &BuildOptions) -> Bvh2 {
     let mut slots = vec![Slot::Unused; 2 * n - 1];
     let ctx = Ctx { opts, bins: opts.bin_count(), max_leaf: opts.max_leaf_size.max(1) };
     let bounds = union_bounds(prims);
-    build_rec(&ctx, prims, 0, &mut slots, 0, bounds, 0);
+    build_rec(&ctx, prims, 0, &mut slots, 0, bounds, 0, &mut Scratch::new());
     let prim_ids = prims.iter().map(|p| p.id).collect();
     Bvh2 { nodes: compact(&slots), prim_ids }
 }
@@ -148,6 +148,7 @@ fn centroid_bounds(prims: &[BuildPrim]) -> Aabb {
 
 /// Builds the subtree over `prims` (which start at `first` in the global array) into
 /// `slots`, whose slot 0 is the subtree root and whose global index is `base`.
+#[allow(clippy::too_many_arguments)]
 fn build_rec(
     ctx: &Ctx,
     prims: &mut [BuildPrim],
@@ -156,6 +157,7 @@ fn build_rec(
     base: u32,
     bounds: Aabb,
     depth: usize,
+    scratch: &mut Scratch,
 ) {
     let n = prims.len();
     debug_assert_eq!(slots.len(), 2 * n - 1);
@@ -164,7 +166,7 @@ fn build_rec(
         slots[0] = leaf;
         return;
     }
-    let mid = match choose_split(ctx, prims, bounds, depth) {
+    let mid = match choose_split(ctx, prims, bounds, depth, scratch) {
         Some(mid) => mid,
         None => {
             slots[0] = leaf;
@@ -181,12 +183,12 @@ fn build_rec(
     let right = base + 2 * nl as u32;
     if n > PARALLEL_SUBTREE_THRESHOLD {
         rayon::join(
-            || build_rec(ctx, lp, first, ls, left, lb, depth + 1),
-            || build_rec(ctx, rp, first + nl, rs, right, rb, depth + 1),
+            || build_rec(ctx, lp, first, ls, left, lb, depth + 1, scratch),
+            || build_rec(ctx, rp, first + nl, rs, right, rb, depth + 1, &mut Scratch::new()),
         );
     } else {
-        build_rec(ctx, lp, first, ls, left, lb, depth + 1);
-        build_rec(ctx, rp, first + nl, rs, right, rb, depth + 1);
+        build_rec(ctx, lp, first, ls, left, lb, depth + 1, scratch);
+        build_rec(ctx, rp, first + nl, rs, right, rb, depth + 1, scratch);
     }
     debug_assert_eq!(rs.len(), 2 * nr - 1);
     slots[0] = Slot::Inner { bounds, left, right };
@@ -194,7 +196,13 @@ fn build_rec(
 
 /// Chooses where to split `prims` and partitions them; returns the size of the left part,
 /// or `None` to make a leaf.
-fn choose_split(ctx: &Ctx, prims: &mut [BuildPrim], bounds: Aabb, depth: usize) -> Option<usize> {
+fn choose_split(
+    ctx: &Ctx,
+    prims: &mut [BuildPrim],
+    bounds: Aabb,
+    depth: usize,
+    scratch: &mut Scratch,
+) -> Option<usize> {
     let n = prims.len();
     let cb = centroid_bounds(prims);
     let must_split = n > ctx.max_leaf;
@@ -206,28 +214,30 @@ fn choose_split(ctx: &Ctx, prims: &mut [BuildPrim], bounds: Aabb, depth: usize) 
         // Every centroid is the same point: no plane separates them.
         return must_split.then(|| median_split(prims, &cb));
     }
-    let k = ctx.bins;
-    let bins = bin_prims(prims, &cb, k);
+    // Small nodes use fewer bins: more bins than primitives only cost time.
+    let k = ctx.bins.min(n.max(8));
+    let maps: [(f32, f32); 3] =
+        std::array::from_fn(|a| if ext[a] > 0.0 { bin_mapping(&cb, a, k) } else { (cb.min[a], 0.0) });
+    bin_prims(prims, &maps, k, &mut scratch.bins);
     let mut best = (f32::INFINITY, 0usize, 0usize); // (cost, axis, split bin)
-    let mut right_area = [0.0f32; MAX_BINS];
-    let mut right_count = [0u32; MAX_BINS];
     for axis in (0..3).filter(|&a| ext[a] > 0.0) {
-        let b = &bins[axis];
-        let (mut acc, mut cnt) = (Aabb::EMPTY, 0u32);
+        let b = &scratch.bins[axis * MAX_BINS..axis * MAX_BINS + k];
+        let (mut acc, mut cnt) = (Bin::EMPTY, 0u32);
         for i in (1..k).rev() {
-            acc = acc.union(&b[i].0);
-            cnt += b[i].1;
-            right_area[i] = acc.half_area();
-            right_count[i] = cnt;
+            acc.union(&b[i]);
+            cnt += b[i].count;
+            scratch.right_area[i] = acc.half_area();
+            scratch.right_count[i] = cnt;
         }
-        let (mut acc, mut cnt) = (Aabb::EMPTY, 0u32);
+        let (mut acc, mut cnt) = (Bin::EMPTY, 0u32);
         for i in 0..k - 1 {
-            acc = acc.union(&b[i].0);
-            cnt += b[i].1;
-            if cnt == 0 || right_count[i + 1] == 0 {
+            acc.union(&b[i]);
+            cnt += b[i].count;
+            let right = scratch.right_count[i + 1];
+            if cnt == 0 || right == 0 {
                 continue;
             }
-            let cost = acc.half_area() * cnt as f32 + right_area[i + 1] * right_count[i + 1] as f32;
+            let cost = acc.half_area() * cnt as f32 + scratch.right_area[i + 1] * right as f32;
             if cost < best.0 {
                 best = (cost, axis, i + 1);
             }
@@ -246,8 +256,11 @@ fn choose_split(ctx: &Ctx, prims: &mut [BuildPrim], bounds: Aabb, depth: usize) 
         }
     }
     let (axis, split_bin) = (best.1, best.2);
-    let (lo, scale) = bin_mapping(&cb, axis, k);
-    let mid = partition(prims, |p| bin_index(p.centroid()[axis], lo, scale, k) < split_bin);
+    let (lo, scale) = maps[axis];
+    // `min(trunc(x), k-1) < s` is `x < s` for the integer `s <= k-1`: the same arithmetic
+    // as binning, without the float-to-int conversion.
+    let split = split_bin as f32;
+    let mid = partition(prims, |p| (p.centroid()[axis] - lo) * scale < split);
     if mid == 0 || mid == n {
         // Cannot happen with exact arithmetic; guard against rounding anyway.
         return Some(median_split(prims, &cb));
@@ -255,7 +268,45 @@ fn choose_split(ctx: &Ctx, prims: &mut [BuildPrim], bounds: Aabb, depth: usize) 
     Some(mid)
 }
 
-type Bins = [(Aabb, u32); MAX_BINS];
+/// One SAH bin: bounds of the primitives in it (16-byte lanes so unions are two SIMD
+/// min/max operations) and their count.
+#[derive(Clone, Copy, Debug)]
+struct Bin {
+    min: Vec3A,
+    max: Vec3A,
+    count: u32,
+}
+
+impl Bin {
+    const EMPTY: Bin = Bin { min: Vec3A::splat(f32::INFINITY), max: Vec3A::splat(f32::NEG_INFINITY), count: 0 };
+
+    #[inline]
+    fn union(&mut self, o: &Bin) {
+        self.min = self.min.min(o.min);
+        self.max = self.max.max(o.max);
+    }
+
+    #[inline]
+    fn half_area(&self) -> f32 {
+        let e = (self.max - self.min).max(Vec3A::ZERO);
+        e.x * e.y + e.y * e.z + e.z * e.x
+    }
+}
+
+/// Per-task scratch memory of the builder, reused for every node the task splits (only the
+/// first `k` bins of each axis are touched per node), so splitting allocates nothing.
+struct Scratch {
+    /// `3 * MAX_BINS` bins, axis-major.
+    bins: Vec<Bin>,
+    right_area: Vec<f32>,
+    right_count: Vec<u32>,
+}
+
+impl Scratch {
+    fn new() -> Self {
+        Self { bins: vec![Bin::EMPTY; 3 * MAX_BINS], right_area: vec![0.0; MAX_BINS], right_count: vec![0; MAX_BINS] }
+    }
+}
 
 #[inline]
 fn bin_mapping(cb: &Aabb, axis: usize, k: usize) -> (f32, f32) {
@@ -263,44 +314,54 @@ fn bin_mapping(cb: &Aabb, axis: usize, k: usize) -> (f32, f32) {
     (cb.min[axis], k as f32 * (1.0 - 1e-6) / ext)
 }
 
-#[inline]
-fn bin_index(c: f32, lo: f32, scale: f32, k: usize) -> usize {
-    (((c - lo) * scale) as usize).min(k - 1)
-}
-
-fn bin_prims(prims: &[BuildPrim], cb: &Aabb, k: usize) -> [Bins; 3] {
-    let maps: [(f32, f32); 3] =
-        std::array::from_fn(|a| if cb.extent()[a] > 0.0 { bin_mapping(cb, a, k) } else { (cb.min[a], 0.0) });
-    let bin_chunk = |chunk: &[BuildPrim]| {
-        let mut bins = [[(Aabb::EMPTY, 0u32); MAX_BINS]; 3];
+/// Fills the first `k` bins of each axis of `bins` with `prims`; large inputs bin in
+/// parallel chunks whose exact reduction keeps the result independent of the thread count.
+fn bin_prims(prims: &[BuildPrim], maps: &[(f32, f32); 3], k: usize, bins: &mut [Bin]) {
+    use wide::f32x4;
+    // All three axes' bin indices in one SIMD step; clamping in the float domain makes the
+    // truncating conversion exact (and maps the unused fourth lane to bin 0).
+    let lo = f32x4::new([maps[0].0, maps[1].0, maps[2].0, 0.0]);
+    let scale = f32x4::new([maps[0].1, maps[1].1, maps[2].1, 0.0]);
+    let top = f32x4::splat((k - 1) as f32);
+    let bin_chunk = |chunk: &[BuildPrim], bins: &mut [Bin]| {
+        for a in 0..3 {
+            bins[a * MAX_BINS..a * MAX_BINS + k].fill(Bin::EMPTY);
+        }
         for p in chunk {
-            let c = p.centroid();
+            let (min, max) = (Vec3A::from(p.bounds.min), Vec3A::from(p.bounds.max));
+            let c = (min + max) * 0.5;
+            let c = f32x4::new([c.x, c.y, c.z, 0.0]);
+            let idx = ((c - lo) * scale).min(top).max(f32x4::ZERO).fast_trunc_int().to_array();
             for a in 0..3 {
-                let i = bin_index(c[a], maps[a].0, maps[a].1, k);
-                let bin = &mut bins[a][i];
-                bin.0 = bin.0.union(&p.bounds);
-                bin.1 += 1;
+                let bin = &mut bins[a * MAX_BINS + idx[a] as usize];
+                bin.min = bin.min.min(min);
+                bin.max = bin.max.max(max);
+                bin.count += 1;
             }
         }
-        bins
     };
     if prims.len() < PARALLEL_BIN_THRESHOLD {
-        return bin_chunk(prims);
+        return bin_chunk(prims, bins);
     }
     use rayon::prelude::*;
-    prims
+    let partial = prims
         .par_chunks(PARALLEL_BIN_THRESHOLD / 4)
-        .map(bin_chunk)
+        .map(|chunk| {
+            let mut b = vec![Bin::EMPTY; 3 * MAX_BINS];
+            bin_chunk(chunk, &mut b);
+            b
+        })
         .reduce_with(|mut a, b| {
             for axis in 0..3 {
-                for i in 0..k {
-                    a[axis][i].0 = a[axis][i].0.union(&b[axis][i].0);
-                    a[axis][i].1 += b[axis][i].1;
+                for i in axis * MAX_BINS..axis * MAX_BINS + k {
+                    a[i].union(&b[i]);
+                    a[i].count += b[i].count;
                 }
             }
             a
         })
-        .expect("non-empty")
+        .expect("non-empty");
+    bins.copy_from_slice(&partial);
 }
 
 /// Object-median split on the largest centroid axis (by index when all centroids agree).
