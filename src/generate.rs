@@ -114,8 +114,13 @@ pub fn torus_knot(n_len: usize, n_around: usize, p: f32, q: f32, tube: f32, bump
     for i in 0..n_len {
         let t = std::f32::consts::TAU * i as f32 / n_len as f32;
         let c = curve(t);
-        let tangent = (curve(t + 1e-3) - curve(t - 1e-3)).normalize();
-        let (u, v) = crate::math::orthonormal_basis(tangent);
+        // Frenet frame: continuous and periodic, since a torus knot's curvature never vanishes.
+        let h = 1e-2;
+        let (prev, next) = (curve(t - h), curve(t + h));
+        let tangent = (next - prev).normalize();
+        let bend = next + prev - 2.0 * c;
+        let u = (bend - tangent * bend.dot(tangent)).normalize();
+        let v = tangent.cross(u);
         for j in 0..n_around {
             let a = std::f32::consts::TAU * j as f32 / n_around as f32;
             let ripple = 1.0 + bump * ((7.0 * a).sin() * (31.0 * t).sin());
