@@ -60,6 +60,29 @@ struct BenchArgs {
 enum IntegratorArg {
     /// Shading normals as colours (CS184 parts 1-2).
     Normals,
+    /// Emission plus direct lighting (CS184 part 3): bounces 0 and 1.
+    Direct,
+    /// Global illumination up to -m bounces (CS184 part 4).
+    Global,
+    /// Only direct lighting: bounce 1.
+    DirectOnly,
+    /// Only indirect lighting: bounces 2 to -m.
+    IndirectOnly,
+    /// Exactly -m bounces.
+    Bounce,
+}
+
+impl From<IntegratorArg> for IntegratorKind {
+    fn from(a: IntegratorArg) -> Self {
+        match a {
+            IntegratorArg::Normals => IntegratorKind::Normals,
+            IntegratorArg::Direct => IntegratorKind::Direct,
+            IntegratorArg::Global => IntegratorKind::Global,
+            IntegratorArg::DirectOnly => IntegratorKind::DirectOnly,
+            IntegratorArg::IndirectOnly => IntegratorKind::IndirectOnly,
+            IntegratorArg::Bounce => IntegratorKind::Bounce,
+        }
+    }
 }
 
 #[derive(Args)]
@@ -94,8 +117,11 @@ struct RenderArgs {
     #[arg(short = 'H', long = "hemisphere")]
     hemisphere: bool,
     /// What to compute per camera ray.
-    #[arg(long, value_enum, default_value_t = IntegratorArg::Normals)]
+    #[arg(long, value_enum, default_value_t = IntegratorArg::Global)]
     integrator: IntegratorArg,
+    /// Never terminate paths early by Russian roulette (only -m ends them).
+    #[arg(long)]
+    no_russian_roulette: bool,
     /// Seed of all random numbers.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -228,10 +254,13 @@ fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         eprint!("[raypack] Collecting primitives... ");
         let t = Instant::now();
         let (builder, warnings) = load(a.scene.as_deref())?;
-        eprintln!("Done! ({:.4} sec)", t.elapsed().as_secs_f64());
+        let load_time = t.elapsed().as_secs_f64();
+        eprintln!("Done! ({load_time:.4} sec)");
         print_warnings(&warnings);
         let opts = BuildOptions { quality: a.quality.into(), ..BuildOptions::default() };
+        let t = Instant::now();
         let scene = commit(builder, &opts);
+        let setup_time = [("load", load_time), ("BVH build", t.elapsed().as_secs_f64())];
         let aspect = width as f32 / height as f32;
         let camera = match &a.camera {
             Some(p) => raypack::io::camera_file::load_camera_file(p)?,
@@ -245,34 +274,71 @@ fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             max_depth: a.max_depth,
             hemisphere_sampling: a.hemisphere,
             adaptive,
-            integrator: match a.integrator {
-                IntegratorArg::Normals => IntegratorKind::Normals,
-            },
+            integrator: a.integrator.into(),
             seed: a.seed,
             brute_force: a.brute_force,
+            russian_roulette: !a.no_russian_roulette,
         };
         let bar = progress_bar(width.div_ceil(render::TILE) * height.div_ceil(render::TILE));
         eprintln!("[raypack] Rendering {width}x{height} with {} threads...", rayon::current_num_threads());
         let out = render::render(&scene, &camera, &settings, &|done| bar.set_position(done));
         bar.finish_and_clear();
-        let secs = out.stats.time.as_secs_f64();
-        let rays = out.stats.rays;
-        eprintln!("[raypack] Rendering... 100%! ({secs:.4}s)");
-        eprintln!(
-            "[raypack] BVH traced {} rays (camera {}, shadow {}, bounce {}).",
-            rays.total(),
-            rays.camera,
-            rays.shadow,
-            rays.bounce
-        );
-        eprintln!("[raypack] Average speed {:.4} million rays per second.", rays.total() as f64 / secs / 1e6);
-        let tests = raypack::render::stats::intersection_tests_per_ray(&scene, &camera, &settings);
-        eprintln!("[raypack] Averaged {tests:.3} intersection tests per camera ray.");
+        eprintln!("[raypack] Rendering... 100%! ({:.4}s)", out.stats.time.as_secs_f64());
+        report(&scene, &settings, &out, setup_time);
+        let t = Instant::now();
         eprint!("[raypack] Saving to file: {}... ", output.display());
         out.film.write(&output, settings.integrator.encoding())?;
-        eprintln!("Done!");
+        if let Some((batch, tol)) = settings.adaptive {
+            let rate = render::adaptive::rate_path(&output);
+            let film = render::adaptive::rate_film(&out.samples_per_pixel, width, height, settings.samples_per_pixel);
+            film.write(&rate, render::Encoding::Display)?;
+            eprint!("(sample rate: {}, batch {batch}, tolerance {tol}) ", rate.display());
+        }
+        eprintln!("Done! ({:.4} sec)", t.elapsed().as_secs_f64());
         Ok(())
     })
+}
+
+/// The end-of-render report: CS184's lines (rays traced, Mrays/s, tests per ray), per kind of
+/// ray, then samples per second and time per phase.
+fn report(scene: &Scene, settings: &RenderSettings, out: &render::RenderOutput, setup: [(&str, f64); 2]) {
+    let s = &out.stats;
+    let secs = s.time.as_secs_f64().max(1e-9);
+    let rays = s.rays;
+    eprintln!("[raypack] BVH traced {} rays.", rays.total());
+    eprintln!("[raypack] Average speed {:.4} million rays per second.", rays.total() as f64 / secs / 1e6);
+    for kind in render::RayKind::ALL {
+        let n = rays.of(kind);
+        let tests = render::stats::tests_per_ray(scene, &s.sampled_rays[kind as usize], kind, settings.brute_force);
+        let tests = tests.map_or("-".into(), |t| format!("{t:.3}"));
+        eprintln!(
+            "[raypack]   {:<6} {:>12} rays, {:>9.4} Mrays/s, {} intersection tests per ray",
+            kind.name(),
+            n,
+            n as f64 / secs / 1e6,
+            tests
+        );
+    }
+    let px = (settings.width * settings.height) as f64;
+    eprintln!(
+        "[raypack] {} samples ({:.1} per pixel), {:.4} million samples per second.",
+        s.samples,
+        s.samples as f64 / px,
+        s.samples as f64 / secs / 1e6
+    );
+    if s.invalid_samples > 0 {
+        eprintln!("[raypack] warning: {} samples were NaN or infinite and counted as black.", s.invalid_samples);
+    }
+    eprintln!(
+        "[raypack] Time: {} {:.4}s, {} {:.4}s, render {:.4}s (thread time: camera rays {:.4}s, shading {:.4}s).",
+        setup[0].0,
+        setup[0].1,
+        setup[1].0,
+        setup[1].1,
+        secs,
+        s.camera_time.as_secs_f64(),
+        s.shading_time.as_secs_f64()
+    );
 }
 
 fn progress_bar(len: usize) -> indicatif::ProgressBar {

@@ -1,18 +1,32 @@
 //! The renderer: tile-parallel image formation over a committed [`Scene`].
 //!
-//! Pixels are split into square tiles rendered by rayon tasks. Each pixel draws its random
-//! numbers from its own generator seeded by `(seed, pixel index)`, so the image is a pure
+//! Pixels are split into square tiles rendered by rayon tasks, each with its own buffers and
+//! counters (no locks, no allocation per sample). A tile is rendered in passes: each pass
+//! generates a batch of camera rays for the pixels still sampling, traces them in one call
+//! ([`trace::Tracer::closest_batch`]) and shades them. Each sample `s` of pixel `p` draws its
+//! random numbers from its own generator seeded by `(seed, p, s)`, so the image is a pure
 //! function of the scene, the settings and the seed, whatever the thread count.
 
+pub mod adaptive;
+pub mod bsdf;
 pub mod film;
+pub mod frame;
 pub mod integrator;
+pub mod light;
 pub mod sampler;
+pub mod sampling;
+pub mod spawn;
 pub mod stats;
+pub mod trace;
 
 pub use film::{Encoding, Film, ImageError};
 pub use integrator::IntegratorKind;
+pub use stats::{RayCounts, RayKind, RayLog};
 
+use crate::math::Vec3;
+use crate::ray::{Hit, Ray};
 use crate::scene::{Camera, Scene};
+use adaptive::PixelEstimate;
 use sampler::Rng;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
@@ -43,6 +57,8 @@ pub struct RenderSettings {
     pub seed: u64,
     /// Test every primitive instead of using the BVH (CS184's "without BVH" timing).
     pub brute_force: bool,
+    /// Terminate paths by Russian roulette from the second bounce on (unbiased).
+    pub russian_roulette: bool,
 }
 
 impl Default for RenderSettings {
@@ -55,36 +71,11 @@ impl Default for RenderSettings {
             max_depth: 1,
             hemisphere_sampling: false,
             adaptive: None,
-            integrator: IntegratorKind::Normals,
+            integrator: IntegratorKind::Global,
             seed: 0,
             brute_force: false,
+            russian_roulette: true,
         }
-    }
-}
-
-/// Rays traced, by kind.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct RayCounts {
-    /// Camera (primary) rays.
-    pub camera: u64,
-    /// Shadow (occlusion) rays.
-    pub shadow: u64,
-    /// Bounce (secondary closest-hit) rays.
-    pub bounce: u64,
-}
-
-impl RayCounts {
-    /// All rays.
-    pub fn total(&self) -> u64 {
-        self.camera + self.shadow + self.bounce
-    }
-}
-
-impl std::ops::AddAssign for RayCounts {
-    fn add_assign(&mut self, o: Self) {
-        self.camera += o.camera;
-        self.shadow += o.shadow;
-        self.bounce += o.bounce;
     }
 }
 
@@ -93,10 +84,18 @@ impl std::ops::AddAssign for RayCounts {
 pub struct RenderStats {
     /// Rays traced by kind.
     pub rays: RayCounts,
+    /// A sparse sample of the rays traced, by kind (`RayKind as usize`), for statistics.
+    pub sampled_rays: [Vec<Ray>; 3],
     /// Camera samples taken (all pixels).
     pub samples: u64,
+    /// Samples whose radiance was NaN or infinite (counted as black).
+    pub invalid_samples: u64,
     /// Wall-clock time of the render.
     pub time: Duration,
+    /// Thread time spent generating and tracing camera rays.
+    pub camera_time: Duration,
+    /// Thread time spent shading (including shadow and bounce rays).
+    pub shading_time: Duration,
 }
 
 /// The result of a render.
@@ -109,6 +108,9 @@ pub struct RenderOutput {
     /// Measurements.
     pub stats: RenderStats,
 }
+
+/// Samples per pixel per pass without adaptive sampling (bounds the per-tile buffers).
+const PASS_SAMPLES: u32 = 16;
 
 /// Renders `scene` through `camera`. `progress` is called with the number of tiles done
 /// each time a tile completes.
@@ -126,7 +128,7 @@ pub fn render(
         (0..h.div_ceil(TILE)).flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty))).collect();
     let done = AtomicU64::new(0);
     let integrator = integrator::Integrator::new(scene, settings);
-    let rendered: Vec<(Vec<crate::math::Vec3>, Vec<u32>, RayCounts)> = tiles
+    let rendered: Vec<TileResult> = tiles
         .par_iter()
         .map(|&(tx, ty)| {
             let r = render_tile(&integrator, camera, settings, tx, ty);
@@ -136,19 +138,40 @@ pub fn render(
         .collect();
     let mut film = Film::new(w, h);
     let mut spp = vec![0u32; w * h];
-    let mut rays = RayCounts::default();
-    for (&(tx, ty), (pixels, counts, r)) in tiles.iter().zip(rendered) {
-        rays += r;
+    let mut log = RayLog::default();
+    let mut stats = RenderStats::default();
+    for (&(tx, ty), tile) in tiles.iter().zip(rendered) {
+        log.merge(tile.log);
+        stats.invalid_samples += tile.invalid_samples;
+        stats.camera_time += tile.camera_time;
+        stats.shading_time += tile.shading_time;
         let (x0, y0) = (tx * TILE, ty * TILE);
         let tw = TILE.min(w - x0);
-        for (i, (p, c)) in pixels.into_iter().zip(counts).enumerate() {
+        for (i, est) in tile.pixels.iter().enumerate() {
             let (x, y) = (x0 + i % tw, y0 + i / tw);
-            film.pixels[y * w + x] = p;
-            spp[y * w + x] = c;
+            film.pixels[y * w + x] = est.mean();
+            spp[y * w + x] = est.n;
         }
     }
-    let samples = spp.iter().map(|&s| s as u64).sum();
-    RenderOutput { film, samples_per_pixel: spp, stats: RenderStats { rays, samples, time: start.elapsed() } }
+    stats.samples = spp.iter().map(|&s| s as u64).sum();
+    stats.rays = log.counts;
+    stats.sampled_rays = log.sampled;
+    stats.time = start.elapsed();
+    RenderOutput { film, samples_per_pixel: spp, stats }
+}
+
+struct TileResult {
+    pixels: Vec<PixelEstimate>,
+    log: RayLog,
+    invalid_samples: u64,
+    camera_time: Duration,
+    shading_time: Duration,
+}
+
+/// The random number stream of sample `sample` of pixel `pixel`.
+#[inline]
+pub fn sample_stream(pixel: usize, sample: u32) -> u64 {
+    ((sample as u64) << 32) | pixel as u64
 }
 
 fn render_tile(
@@ -157,20 +180,69 @@ fn render_tile(
     settings: &RenderSettings,
     tx: usize,
     ty: usize,
-) -> (Vec<crate::math::Vec3>, Vec<u32>, RayCounts) {
+) -> TileResult {
     let (w, h) = (settings.width, settings.height);
     let (x0, y0) = (tx * TILE, ty * TILE);
     let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
-    let mut pixels = Vec::with_capacity((x1 - x0) * (y1 - y0));
-    let mut counts = Vec::with_capacity(pixels.capacity());
-    let mut rays = RayCounts::default();
-    for y in y0..y1 {
-        for x in x0..x1 {
-            let mut rng = Rng::new(settings.seed, (y * w + x) as u64);
-            let (value, n) = integrator.pixel(camera, x, y, &mut rng, &mut rays);
-            pixels.push(value);
-            counts.push(n);
+    let tw = x1 - x0;
+    let npix = tw * (y1 - y0);
+    let spp = settings.samples_per_pixel.max(1);
+    let batch = match settings.adaptive {
+        Some((b, _)) => b.max(1).min(spp),
+        None => spp.min(PASS_SAMPLES),
+    };
+    let centre_only = spp == 1;
+    let mut pixels = vec![PixelEstimate::default(); npix];
+    // Per-pass buffers, sized once for the largest pass.
+    let cap = npix * batch as usize;
+    let mut rays: Vec<Ray> = Vec::with_capacity(cap);
+    let mut rngs: Vec<Rng> = Vec::with_capacity(cap);
+    let mut owner: Vec<u32> = Vec::with_capacity(cap);
+    let mut hits: Vec<Hit> = Vec::with_capacity(cap);
+    let mut log = RayLog::default();
+    let (mut invalid, mut camera_time, mut shading_time) = (0u64, Duration::ZERO, Duration::ZERO);
+    loop {
+        let t0 = Instant::now();
+        rays.clear();
+        rngs.clear();
+        owner.clear();
+        for (i, est) in pixels.iter().enumerate() {
+            if est.done {
+                continue;
+            }
+            let (x, y) = (x0 + i % tw, y0 + i / tw);
+            let first = est.n;
+            for s in first..(first + batch).min(spp) {
+                let mut rng = Rng::new(settings.seed, sample_stream(y * w + x, s));
+                // One sample goes through the pixel centre; more are jittered uniformly.
+                let (jx, jy) = if centre_only { (0.5, 0.5) } else { rng.next_2d() };
+                let ray = camera.generate_ray((x as f32 + jx) / w as f32, 1.0 - (y as f32 + jy) / h as f32);
+                log.record(RayKind::Camera, &ray);
+                rays.push(ray);
+                rngs.push(rng);
+                owner.push(i as u32);
+            }
         }
+        if rays.is_empty() {
+            break;
+        }
+        hits.clear();
+        hits.resize(rays.len(), Hit::MISS);
+        integrator.tracer().closest_batch(&rays, &mut hits);
+        let t1 = Instant::now();
+        for ((ray, hit), (rng, &i)) in rays.iter().zip(&hits).zip(rngs.iter_mut().zip(&owner)) {
+            let mut l = integrator.radiance(ray, hit, rng, &mut log);
+            if !l.is_finite() {
+                invalid += 1;
+                l = Vec3::ZERO;
+            }
+            pixels[i as usize].add(l);
+        }
+        for est in &mut pixels {
+            est.done = est.n >= spp || settings.adaptive.is_some_and(|(_, tol)| est.converged(tol));
+        }
+        camera_time += t1 - t0;
+        shading_time += t1.elapsed();
     }
-    (pixels, counts, rays)
+    TileResult { pixels, log, invalid_samples: invalid, camera_time, shading_time }
 }

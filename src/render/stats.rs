@@ -1,25 +1,145 @@
-//! Traversal statistics in the manner of CS184's "intersection tests per ray".
+//! Render statistics: rays by kind, a sparse sample of them, and CS184's "intersection tests
+//! per ray" measured on that sample with the reference traversal.
 
-use super::RenderSettings;
-use crate::scene::{Camera, Scene};
+use crate::ray::Ray;
+use crate::scene::Scene;
 
-/// Mean primitive intersection tests per camera ray through pixel centres, measured with
-/// the scalar reference traversal on every 4th pixel of every 4th row (or `num_prims` with
-/// brute force).
-pub fn intersection_tests_per_ray(scene: &Scene, camera: &Camera, s: &RenderSettings) -> f64 {
-    if s.brute_force {
-        return scene.num_prims() as f64;
-    }
-    let (mut rays, mut tests) = (0u64, 0u64);
-    for y in (0..s.height).step_by(4) {
-        for x in (0..s.width).step_by(4) {
-            let ray = camera.generate_ray((x as f32 + 0.5) / s.width as f32, 1.0 - (y as f32 + 0.5) / s.height as f32);
-            scene.bvh2().intersect(&ray, |prim, tfar| {
-                tests += 1;
-                scene.intersect_prim(prim, &ray, tfar)
-            });
-            rays += 1;
+/// The kinds of rays a render traces.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RayKind {
+    /// Primary rays from the camera (closest hit).
+    Camera = 0,
+    /// Occlusion rays toward sampled lights (any hit).
+    Shadow = 1,
+    /// Closest-hit secondary rays: path continuations, and under `-H` the hemisphere rays of
+    /// direct lighting.
+    Bounce = 2,
+}
+
+impl RayKind {
+    /// All kinds, in report order.
+    pub const ALL: [RayKind; 3] = [RayKind::Camera, RayKind::Shadow, RayKind::Bounce];
+
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            RayKind::Camera => "camera",
+            RayKind::Shadow => "shadow",
+            RayKind::Bounce => "bounce",
         }
     }
-    tests as f64 / rays.max(1) as f64
+}
+
+/// Rays traced, by kind.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RayCounts {
+    /// Camera (primary) rays.
+    pub camera: u64,
+    /// Shadow (occlusion) rays.
+    pub shadow: u64,
+    /// Bounce (secondary closest-hit) rays.
+    pub bounce: u64,
+}
+
+impl RayCounts {
+    /// All rays.
+    pub fn total(&self) -> u64 {
+        self.camera + self.shadow + self.bounce
+    }
+
+    /// The count of one kind.
+    pub fn of(&self, kind: RayKind) -> u64 {
+        match kind {
+            RayKind::Camera => self.camera,
+            RayKind::Shadow => self.shadow,
+            RayKind::Bounce => self.bounce,
+        }
+    }
+}
+
+impl std::ops::AddAssign for RayCounts {
+    fn add_assign(&mut self, o: Self) {
+        self.camera += o.camera;
+        self.shadow += o.shadow;
+        self.bounce += o.bounce;
+    }
+}
+
+/// Keep one ray in this many of each kind (per tile, the first one always) for statistics.
+const SAMPLE_EVERY: u64 = 997;
+/// At most this many sampled rays of each kind per tile.
+const SAMPLES_PER_TILE: usize = 16;
+
+/// Per-tile ray bookkeeping: counts, and a sparse deterministic sample of the rays. Capacity
+/// is reserved up front, so recording never allocates.
+#[derive(Clone, Debug)]
+pub struct RayLog {
+    /// Rays traced by kind.
+    pub counts: RayCounts,
+    /// Sampled rays, indexed by `RayKind as usize`.
+    pub sampled: [Vec<Ray>; 3],
+}
+
+impl Default for RayLog {
+    fn default() -> Self {
+        Self { counts: RayCounts::default(), sampled: std::array::from_fn(|_| Vec::with_capacity(SAMPLES_PER_TILE)) }
+    }
+}
+
+impl RayLog {
+    /// Counts one ray of `kind` (and keeps it if it falls on the sampling grid).
+    #[inline]
+    pub fn record(&mut self, kind: RayKind, ray: &Ray) {
+        let c = match kind {
+            RayKind::Camera => &mut self.counts.camera,
+            RayKind::Shadow => &mut self.counts.shadow,
+            RayKind::Bounce => &mut self.counts.bounce,
+        };
+        let n = *c;
+        *c += 1;
+        if n % SAMPLE_EVERY == 0 {
+            let s = &mut self.sampled[kind as usize];
+            if s.len() < SAMPLES_PER_TILE {
+                s.push(*ray);
+            }
+        }
+    }
+
+    /// Adds another log's counts and samples.
+    pub fn merge(&mut self, o: RayLog) {
+        self.counts += o.counts;
+        for (a, b) in self.sampled.iter_mut().zip(o.sampled) {
+            a.extend(b);
+        }
+    }
+}
+
+/// Mean primitive intersection tests per ray of `kind` over `rays`, with the scalar reference
+/// traversal of the binary BVH (closest hit for camera and bounce rays, any hit for shadow
+/// rays), or the primitive count with brute force. `None` without rays.
+pub fn tests_per_ray(scene: &Scene, rays: &[Ray], kind: RayKind, brute_force: bool) -> Option<f64> {
+    if rays.is_empty() {
+        return None;
+    }
+    if brute_force {
+        return Some(scene.num_prims() as f64);
+    }
+    let mut tests = 0u64;
+    for ray in rays {
+        match kind {
+            RayKind::Shadow => {
+                scene.bvh2().occluded(ray, |prim| {
+                    tests += 1;
+                    scene.intersect_prim(prim, ray, ray.tfar).is_some()
+                });
+            }
+            _ => {
+                scene.bvh2().intersect(ray, |prim, tfar| {
+                    tests += 1;
+                    scene.intersect_prim(prim, ray, tfar)
+                });
+            }
+        }
+    }
+    Some(tests as f64 / rays.len() as f64)
 }

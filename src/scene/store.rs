@@ -228,9 +228,11 @@ impl Scene {
     pub fn surface(&self, ray: &Ray, hit: &Hit) -> SurfaceHit {
         let nt = self.triangles.len();
         let p = hit.prim as usize;
-        let position = ray.at(hit.t);
         if p < nt {
             let [a, b, c] = self.triangles.vertices(p);
+            // From the barycentrics, not `o + t d`: the error is then relative to the vertices'
+            // magnitude, which is what robust ray offsetting assumes.
+            let position = a * (1.0 - hit.u - hit.v) + b * hit.u + c * hit.v;
             let ng = (b - a).cross(c - a).normalize_or(Vec3::Z);
             let mut ns = ng;
             if !self.triangles.normals.is_empty() {
@@ -247,7 +249,10 @@ impl Scene {
             SurfaceHit { position, geometric_normal: ng, shading_normal: ns, material: self.triangles.material[p] }
         } else {
             let s = p - nt;
-            let n = ((position - self.spheres.center[s]) / self.spheres.radius[s]).normalize_or(Vec3::Z);
+            let (center, radius) = (self.spheres.center[s], self.spheres.radius[s]);
+            let n = (ray.at(hit.t) - center).normalize_or(Vec3::Z);
+            // Reprojected onto the sphere, as pbrt does, for the same reason.
+            let position = center + n * radius;
             SurfaceHit { position, geometric_normal: n, shading_normal: n, material: self.spheres.material[s] }
         }
     }

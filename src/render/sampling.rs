@@ -1,0 +1,134 @@
+//! Warps from the unit square to directions and points, each with its density, as in pbrt-v4
+//! (Pharr, Jakob, Humphreys, *Physically Based Rendering*, 4th ed., §A.5) and CS184's
+//! `sampler.cpp`. Directions are in a local frame whose `+z` is the surface normal.
+
+use crate::math::Vec3;
+use std::f32::consts::{FRAC_1_PI, FRAC_PI_2, FRAC_PI_4, PI, TAU};
+
+/// Uniform direction on the `z >= 0` hemisphere; density [`UNIFORM_HEMISPHERE_PDF`].
+#[inline]
+pub fn uniform_hemisphere(u: (f32, f32)) -> Vec3 {
+    let z = u.0;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = TAU * u.1;
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// Density of [`uniform_hemisphere`] per steradian.
+pub const UNIFORM_HEMISPHERE_PDF: f32 = 1.0 / TAU;
+
+/// Uniform direction on the unit sphere; density `1 / 4π`.
+#[inline]
+pub fn uniform_sphere(u: (f32, f32)) -> Vec3 {
+    let z = 1.0 - 2.0 * u.0;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = TAU * u.1;
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// Density of [`uniform_sphere`] per steradian.
+pub const UNIFORM_SPHERE_PDF: f32 = 1.0 / (4.0 * PI);
+
+/// Shirley–Chiu concentric map of the unit square onto the unit disk.
+#[inline]
+pub fn concentric_disk(u: (f32, f32)) -> (f32, f32) {
+    let (a, b) = (2.0 * u.0 - 1.0, 2.0 * u.1 - 1.0);
+    if a == 0.0 && b == 0.0 {
+        return (0.0, 0.0);
+    }
+    let (r, theta) = if a.abs() > b.abs() { (a, FRAC_PI_4 * (b / a)) } else { (b, FRAC_PI_2 - FRAC_PI_4 * (a / b)) };
+    (r * theta.cos(), r * theta.sin())
+}
+
+/// Cosine-weighted direction on the `z >= 0` hemisphere (Malley's method); density
+/// [`cosine_hemisphere_pdf`].
+#[inline]
+pub fn cosine_hemisphere(u: (f32, f32)) -> Vec3 {
+    let (x, y) = concentric_disk(u);
+    Vec3::new(x, y, (1.0 - x * x - y * y).max(0.0).sqrt())
+}
+
+/// Density of [`cosine_hemisphere`] for a direction with `cos θ = cos_theta`.
+#[inline]
+pub fn cosine_hemisphere_pdf(cos_theta: f32) -> f32 {
+    cos_theta.max(0.0) * FRAC_1_PI
+}
+
+/// Uniform direction in the cone of half-angle `acos(cos_max)` around `+z`; density
+/// [`uniform_cone_pdf`].
+#[inline]
+pub fn uniform_cone(u: (f32, f32), cos_max: f32) -> Vec3 {
+    let z = 1.0 - u.0 * (1.0 - cos_max);
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = TAU * u.1;
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// Density of [`uniform_cone`].
+#[inline]
+pub fn uniform_cone_pdf(cos_max: f32) -> f32 {
+    1.0 / (TAU * (1.0 - cos_max))
+}
+
+/// Barycentric coordinates `(b1, b2)` of a uniform point on a triangle
+/// (`p = (1 - b1 - b2) v0 + b1 v1 + b2 v2`), by the square-root warp.
+#[inline]
+pub fn uniform_triangle(u: (f32, f32)) -> (f32, f32) {
+    let s = u.0.sqrt();
+    (u.1 * s, 1.0 - s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::sampler::Rng;
+
+    /// Monte Carlo check that a warp's density is right: the mean of `g(w) / pdf(w)` over
+    /// its samples estimates the integral of `g` over the warp's support.
+    fn integral(n: usize, mut warp: impl FnMut((f32, f32)) -> (Vec3, f32), g: impl Fn(Vec3) -> f32) -> f64 {
+        let mut rng = Rng::new(3, 9);
+        let mut sum = 0.0f64;
+        for _ in 0..n {
+            let (w, pdf) = warp(rng.next_2d());
+            assert!((w.length() - 1.0).abs() < 1e-4, "unit directions");
+            sum += (g(w) / pdf) as f64;
+        }
+        sum / n as f64
+    }
+
+    #[test]
+    fn densities_integrate_known_functions() {
+        let n = 200_000;
+        // ∫_H cos θ dω = π; ∫_S z² dω = 4π/3; ∫_H dω = 2π.
+        let cos = |w: Vec3| w.z.max(0.0);
+        let hemi = integral(n, |u| (uniform_hemisphere(u), UNIFORM_HEMISPHERE_PDF), cos);
+        assert!((hemi - PI as f64).abs() < 0.01, "{hemi}");
+        let cosw = integral(n, |u| (cosine_hemisphere(u), cosine_hemisphere_pdf(cosine_hemisphere(u).z)), |_| 1.0);
+        assert!((cosw - TAU as f64).abs() < 0.05, "{cosw}");
+        let sph = integral(n, |u| (uniform_sphere(u), UNIFORM_SPHERE_PDF), |w| w.z * w.z);
+        assert!((sph - 4.0 * PI as f64 / 3.0).abs() < 0.02, "{sph}");
+        let cm = 0.8;
+        let cone = integral(n, |u| (uniform_cone(u, cm), uniform_cone_pdf(cm)), |_| 1.0);
+        assert!((cone - (TAU * (1.0 - cm)) as f64).abs() < 1e-3, "{cone}");
+        // Every cone sample lies inside the cone.
+        let mut rng = Rng::new(1, 1);
+        assert!((0..1000).all(|_| uniform_cone(rng.next_2d(), cm).z >= cm - 1e-6));
+    }
+
+    #[test]
+    fn triangle_warp_is_uniform() {
+        let mut rng = Rng::new(5, 5);
+        let n = 100_000;
+        let (mut inside_sub, mut mean) = (0usize, (0.0f64, 0.0f64));
+        for _ in 0..n {
+            let (b1, b2) = uniform_triangle(rng.next_2d());
+            assert!(b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= 1.0 + 1e-6);
+            // The sub-triangle b1 + b2 <= 1/2 holds a quarter of the area.
+            inside_sub += (b1 + b2 <= 0.5) as usize;
+            mean.0 += b1 as f64;
+            mean.1 += b2 as f64;
+        }
+        assert!((inside_sub as f64 / n as f64 - 0.25).abs() < 0.005);
+        assert!((mean.0 / n as f64 - 1.0 / 3.0).abs() < 0.005 && (mean.1 / n as f64 - 1.0 / 3.0).abs() < 0.005);
+    }
+}
