@@ -1,0 +1,86 @@
+//! The `raypack render` command line: integrator names, the end-of-render report, and the
+//! atomically written image and sample-rate image.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn raypack(args: &[&str]) -> (bool, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_raypack")).args(args).output().expect("runs");
+    (out.status.success(), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+fn scratch_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("raypack-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn png_size(path: &Path) -> (u32, u32) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let reader = decoder.read_info().unwrap();
+    (reader.info().width, reader.info().height)
+}
+
+fn names(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> =
+        std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn adaptive_render_writes_image_and_rate_image_and_reports_per_ray_kind() {
+    let dir = scratch_dir("adaptive");
+    for out in ["cb.png", "cb.exr"] {
+        let path = dir.join(out);
+        let (ok, log) = raypack(&[
+            "render",
+            "-t",
+            "2",
+            "-r",
+            "40",
+            "30",
+            "-s",
+            "32",
+            "-a",
+            "8",
+            "0.05",
+            "-m",
+            "3",
+            "-f",
+            path.to_str().unwrap(),
+        ]);
+        assert!(ok, "{log}");
+        for kind in ["camera", "shadow", "bounce"] {
+            assert!(
+                log.lines()
+                    .any(|l| l.contains(kind) && l.contains("Mrays/s") && l.contains("intersection tests per ray")),
+                "no CS184 line for {kind} rays:\n{log}"
+            );
+        }
+        assert!(log.contains("million samples per second"), "{log}");
+        assert!(log.contains("Time: load") && log.contains("render"), "{log}");
+    }
+    assert_eq!(png_size(&dir.join("cb.png")), (40, 30));
+    assert_eq!(png_size(&dir.join("cb_rate.png")), (40, 30));
+    // Only the outputs: no temporary files left behind.
+    assert_eq!(names(&dir), ["cb.exr", "cb.png", "cb_rate.png"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn integrator_names_and_bad_values() {
+    let dir = scratch_dir("names");
+    for name in ["normals", "direct", "global", "direct-only", "indirect-only", "bounce"] {
+        let path = dir.join(format!("{name}.png"));
+        let (ok, log) = raypack(&["-r", "16", "12", "--integrator", name, "-m", "2", "-f", path.to_str().unwrap()]);
+        assert!(ok && path.exists(), "{name}: {log}");
+    }
+    let (ok, log) =
+        raypack(&["-r", "16", "12", "--integrator", "photon-mapping", "-f", dir.join("x.png").to_str().unwrap()]);
+    assert!(!ok && log.contains("photon-mapping"), "{log}");
+    // Without -a there is no rate image.
+    assert!(!dir.join("global_rate.png").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
