@@ -138,7 +138,7 @@ pub fn render(
         .collect();
     let mut film = Film::new(w, h);
     let mut spp = vec![0u32; w * h];
-    let mut log = RayLog::default();
+    let mut log = RayLog::for_tiles(tiles.len());
     let mut stats = RenderStats::default();
     for (&(tx, ty), tile) in tiles.iter().zip(rendered) {
         log.merge(tile.log);

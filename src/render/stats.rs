@@ -87,6 +87,14 @@ impl Default for RayLog {
 }
 
 impl RayLog {
+    /// An empty log with room to merge the logs of `tiles` tiles without reallocating.
+    pub fn for_tiles(tiles: usize) -> Self {
+        Self {
+            counts: RayCounts::default(),
+            sampled: std::array::from_fn(|_| Vec::with_capacity(tiles * SAMPLES_PER_TILE)),
+        }
+    }
+
     /// Counts one ray of `kind` (and keeps it if it falls on the sampling grid).
     #[inline]
     pub fn record(&mut self, kind: RayKind, ray: &Ray) {
