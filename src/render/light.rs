@@ -11,7 +11,9 @@
 //! CS184's scenes model each rectangle light twice: a `Light::Area` for sampling and an
 //! emissive quad so that the camera (and hemisphere sampling) can see it. Emissive triangles
 //! lying in an area light's rectangle are that light's *stand-in*: they are not sampled again
-//! (that would count the light twice) and they emit only on the side the light does.
+//! (that would count the light twice) and they emit only on the side the light does. An area
+//! light without such geometry is, as in CS184, found by light sampling only: camera rays and
+//! hemisphere sampling cannot hit it.
 //!
 //! Point, spot and directional lights are deltas: only light sampling finds them, so a scene
 //! lit by them alone renders black under uniform hemisphere sampling, as in CS184.
