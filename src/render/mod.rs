@@ -9,6 +9,7 @@
 
 pub mod adaptive;
 pub mod bsdf;
+pub mod camera;
 pub mod film;
 pub mod frame;
 pub mod integrator;
@@ -128,10 +129,11 @@ pub fn render(
         (0..h.div_ceil(TILE)).flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty))).collect();
     let done = AtomicU64::new(0);
     let integrator = integrator::Integrator::new(scene, settings);
+    let camera = camera::CameraRays::new(camera);
     let rendered: Vec<TileResult> = tiles
         .par_iter()
         .map(|&(tx, ty)| {
-            let r = render_tile(&integrator, camera, settings, tx, ty);
+            let r = render_tile(&integrator, &camera, settings, tx, ty);
             progress(done.fetch_add(1, Ordering::Relaxed) + 1);
             r
         })
@@ -176,7 +178,7 @@ pub fn sample_stream(pixel: usize, sample: u32) -> u64 {
 
 fn render_tile(
     integrator: &integrator::Integrator,
-    camera: &Camera,
+    camera: &camera::CameraRays,
     settings: &RenderSettings,
     tx: usize,
     ty: usize,
@@ -216,7 +218,7 @@ fn render_tile(
                 let mut rng = Rng::new(settings.seed, sample_stream(y * w + x, s));
                 // One sample goes through the pixel centre; more are jittered uniformly.
                 let (jx, jy) = if centre_only { (0.5, 0.5) } else { rng.next_2d() };
-                let ray = camera.generate_ray((x as f32 + jx) / w as f32, 1.0 - (y as f32 + jy) / h as f32);
+                let ray = camera.ray(x as f32 + jx, y as f32 + jy, w, h);
                 log.record(RayKind::Camera, &ray);
                 rays.push(ray);
                 rngs.push(rng);
