@@ -94,6 +94,41 @@ fn white_furnace_hemisphere_sampling_is_unbiased() {
     }
 }
 
+#[test]
+fn microfacet_furnace_light_and_hemisphere_sampling_agree() {
+    // A rough gold sphere under uniform light: its directional albedo has no closed form, but
+    // it is at most 1, and light sampling and hemisphere sampling must agree on it.
+    let gold = Material {
+        name: "gold".into(),
+        bsdf: raypack::Bsdf::Microfacet {
+            eta: Vec3::new(0.21646, 0.42833, 1.3284),
+            k: Vec3::new(3.2390, 2.4599, 1.8661),
+            alpha: 0.3,
+        },
+        emission: Vec3::ZERO,
+    };
+    let (scene, camera) = furnace(gold);
+    let mut means = Vec::new();
+    for hemisphere in [false, true] {
+        let mut s = settings(24, 24, IntegratorKind::Direct);
+        s.samples_per_pixel = 64;
+        s.light_samples = 4;
+        s.hemisphere_sampling = hemisphere;
+        let out = render(&scene, &camera, &s);
+        // The central 12 x 12 pixels all see the sphere.
+        let xs: Vec<f64> =
+            (6..18).flat_map(|y| (6..18).map(move |x| (x, y))).map(|(x, y)| out.film.get(x, y).x as f64).collect();
+        let (m, se) = mean_se(&xs);
+        assert!(m <= ENV as f64 + 3.0 * se, "-H {hemisphere}: mean {m} (se {se}): reflects more than arrives");
+        means.push(xs);
+    }
+    let diff: Vec<f64> = means[0].iter().zip(&means[1]).map(|(a, b)| a - b).collect();
+    let (d, se) = mean_se(&diff);
+    let (m, _) = mean_se(&means[0]);
+    assert!(m > 0.5 * ENV as f64, "gold reflects most of the red: {m}");
+    assert!(d.abs() < 3.0 * se, "light vs hemisphere sampling on the microfacet lobe: {d} (se {se})");
+}
+
 // ---------------------------------------------------------------------------------------------
 // A closed emitting enclosure of albedo a: L = Le / (1 - a) everywhere, L_k = a^k Le per bounce.
 
