@@ -84,3 +84,17 @@ fn integrator_names_and_bad_values() {
     assert!(!dir.join("global_rate.png").exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn same_seed_same_file_with_one_or_two_threads() {
+    let dir = scratch_dir("threads");
+    let run = |t: &str, name: &str| {
+        let path = dir.join(name);
+        let (ok, log) =
+            raypack(&["-t", t, "-r", "40", "30", "-s", "8", "-m", "4", "--seed", "7", "-f", path.to_str().unwrap()]);
+        assert!(ok, "{log}");
+        std::fs::read(path).unwrap()
+    };
+    assert_eq!(run("1", "one.exr"), run("2", "two.exr"), "linear EXR output differs between -t 1 and -t 2");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
