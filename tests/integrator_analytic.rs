@@ -85,6 +85,7 @@ fn white_furnace_hemisphere_sampling_is_unbiased() {
     let out = render(&scene, &camera, &s);
     let xs = luminance(&out);
     let (m, se) = mean_se(&xs);
+    eprintln!("furnace -H: image mean {m} vs {ENV} (se {se})");
     assert!((m / ENV as f64 - 1.0).abs() < 0.01, "image mean {m} vs {ENV} (se {se})");
     assert!((m - ENV as f64).abs() < 4.0 * se + 1e-6, "image mean {m} vs {ENV}: more than 4 standard errors ({se})");
     // Per pixel: 4 · 32 uniform hemisphere rays, each 2 L cos θ: σ = L / √3 / √128 ≈ 0.051 L.
@@ -163,6 +164,7 @@ fn closed_enclosure_returns_le_over_one_minus_albedo() {
             let out = render(&scene, &camera, &s);
             let (m, se) = mean_se(&luminance(&out));
             let what = format!("mesh {mesh}, -H {hemisphere}: mean {m} vs {expect} (se {se})");
+            eprintln!("enclosure {what}");
             assert!((m / expect - 1.0).abs() < 0.01, "{what}");
             assert!((m - expect).abs() < 4.0 * se + 1e-5, "{what}");
         }
@@ -190,6 +192,7 @@ fn bounce_views_split_the_enclosure_by_bounce() {
         ("global -m 2", run(IntegratorKind::Global, 2), le * (1.0 + a + a * a)),
     ];
     for (name, (m, se), expect) in cases {
+        eprintln!("enclosure {name}: {m} vs {expect} (se {se})");
         assert!(
             (m / expect - 1.0).abs() < 0.01 && (m - expect).abs() < 4.0 * se + 1e-5,
             "{name}: {m} vs {expect} (se {se})"
@@ -212,6 +215,10 @@ fn russian_roulette_leaves_the_mean_unchanged() {
     let (a, b) = (luminance(&with), luminance(&without));
     let diff: Vec<f64> = a.iter().zip(&b).map(|(x, y)| x - y).collect();
     let (d, se) = mean_se(&diff);
+    eprintln!(
+        "roulette: mean change {d} (se {se}); bounce rays {} with, {} without",
+        with.stats.rays.bounce, without.stats.rays.bounce
+    );
     assert!(d.abs() < 3.0 * se + 1e-6, "roulette changes the mean by {d} (se {se})");
     for (name, xs) in [("with", &a), ("without", &b)] {
         let (m, se) = mean_se(xs);
@@ -311,6 +318,7 @@ fn light_and_hemisphere_sampling_agree_with_lamberts_formula() {
             let mean_expect = expect.iter().sum::<f64>() / expect.len() as f64;
             // 3 standard errors: a false alarm has odds of about 1 in 370 per comparison.
             let what = format!("area {area}, -H {hemisphere}: mean residual {d} (se {se}), mean {mean_expect}");
+            eprintln!("Lambert {what}");
             assert!(d.abs() < 3.0 * se + 1e-6, "{what}");
             // Light sampling is precise enough (se ≈ 0.1%) to also hold it to 1%.
             assert!(hemisphere || d.abs() < 0.01 * mean_expect, "{what}");
@@ -321,6 +329,7 @@ fn light_and_hemisphere_sampling_agree_with_lamberts_formula() {
     for pair in renders.chunks(2) {
         let diff: Vec<f64> = pair[0].iter().zip(&pair[1]).map(|(a, b)| a - b).collect();
         let (d, se) = mean_se(&diff);
+        eprintln!("light vs hemisphere sampling: {d} (se {se})");
         assert!(d.abs() < 3.0 * se, "light vs hemisphere sampling: {d} (se {se})");
     }
 }
@@ -368,6 +377,7 @@ fn error_falls_like_one_over_root_spp() {
     let (mx, my) = (pts.iter().map(|p| p.0).sum::<f64>() / n, pts.iter().map(|p| p.1).sum::<f64>() / n);
     let slope =
         pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum::<f64>() / pts.iter().map(|p| (p.0 - mx).powi(2)).sum::<f64>();
+    eprintln!("log RMSE vs log spp slope {slope}");
     assert!((slope + 0.5).abs() < 0.05, "log RMSE vs log spp slope {slope}, expected -0.5 ({pts:?})");
 }
 
@@ -408,6 +418,12 @@ fn adaptive_sampling_stops_early_only_where_flat() {
         }
     }
     assert!(!sky.is_empty() && !ground.is_empty());
+    eprintln!(
+        "adaptive: sky pixels {} (max {:?} samples), floor mean {:.1} samples",
+        sky.len(),
+        sky.iter().max(),
+        ground.iter().map(|&n| n as f64).sum::<f64>() / ground.len() as f64
+    );
     assert!(sky.iter().all(|&n| n == 32), "flat sky stops after the first batch: {sky:?}");
     let mean_ground = ground.iter().map(|&n| n as f64).sum::<f64>() / ground.len() as f64;
     assert!(mean_ground > 400.0, "the noisy floor keeps sampling: {mean_ground}");
