@@ -34,8 +34,9 @@ pub mod ray;
 pub mod raysets;
 pub mod render;
 pub mod scene;
+pub mod simd;
 
-pub use bvh::{BuildOptions, BuildQuality, BvhStats, SplitMethod};
+pub use bvh::{BuildOptions, BuildQuality, Bvh8Node, BvhStats, SplitMethod};
 pub use math::{Aabb, Mat3, Mat4, Vec3};
-pub use ray::{Hit, Ray};
+pub use ray::{Hit, Ray, RayPacket8, RayPacket16};
 pub use scene::{Bsdf, Camera, CommitReport, Light, Material, MaterialId, Scene, SceneBuilder, SceneError, SurfaceHit};

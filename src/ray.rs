@@ -91,3 +91,127 @@ impl Hit {
         self.prim != Hit::NONE
     }
 }
+
+macro_rules! ray_packet {
+    ($(#[$doc:meta])* $name:ident, $k:expr, $mask:ty) => {
+        $(#[$doc])*
+        ///
+        /// Structure of arrays, one row per component, in Embree's `RTCRayHitN` style: the
+        /// queries read the ray rows of the lanes set in the `valid` mask they are given and
+        /// write the hit rows of those lanes; `intersect*` also shrinks `tfar` to the hit
+        /// distance. Lanes outside the mask are neither read nor written.
+        #[repr(C, align(64))]
+        #[derive(Clone, Copy, Debug, PartialEq)]
+        pub struct $name {
+            /// Origin x per lane.
+            pub org_x: [f32; $k],
+            /// Origin y per lane.
+            pub org_y: [f32; $k],
+            /// Origin z per lane.
+            pub org_z: [f32; $k],
+            /// Direction x per lane.
+            pub dir_x: [f32; $k],
+            /// Direction y per lane.
+            pub dir_y: [f32; $k],
+            /// Direction z per lane.
+            pub dir_z: [f32; $k],
+            /// Start of the interval (exclusive) per lane.
+            pub tnear: [f32; $k],
+            /// End of the interval (inclusive) per lane; the hit distance after `intersect*`.
+            pub tfar: [f32; $k],
+            /// First surface coordinate of the hit (see [`Hit`]).
+            pub u: [f32; $k],
+            /// Second surface coordinate of the hit.
+            pub v: [f32; $k],
+            /// Primitive id of the hit, [`Hit::NONE`] for a miss.
+            pub prim: [u32; $k],
+        }
+
+        impl Default for $name {
+            fn default() -> Self {
+                Self {
+                    org_x: [0.0; $k],
+                    org_y: [0.0; $k],
+                    org_z: [0.0; $k],
+                    dir_x: [0.0; $k],
+                    dir_y: [0.0; $k],
+                    dir_z: [0.0; $k],
+                    tnear: [0.0; $k],
+                    tfar: [0.0; $k],
+                    u: [0.0; $k],
+                    v: [0.0; $k],
+                    prim: [Hit::NONE; $k],
+                }
+            }
+        }
+
+        impl $name {
+            /// Rays per packet.
+            pub const K: usize = $k;
+            /// The mask with every lane set.
+            pub const ALL: $mask = <$mask>::MAX;
+
+            /// A packet holding `rays` (at most K) in lanes `0 .. rays.len()`, and the mask of
+            /// those lanes.
+            pub fn from_rays(rays: &[Ray]) -> (Self, $mask) {
+                assert!(rays.len() <= $k, "at most {} rays per packet", $k);
+                let mut p = Self::default();
+                for (i, r) in rays.iter().enumerate() {
+                    p.set_ray(i, r);
+                }
+                let mask = if rays.len() == $k { Self::ALL } else { ((1u32 << rays.len()) - 1) as $mask };
+                (p, mask)
+            }
+
+            /// Stores `r` in lane `i` and clears its hit.
+            #[inline]
+            pub fn set_ray(&mut self, i: usize, r: &Ray) {
+                self.org_x[i] = r.origin.x;
+                self.org_y[i] = r.origin.y;
+                self.org_z[i] = r.origin.z;
+                self.dir_x[i] = r.dir.x;
+                self.dir_y[i] = r.dir.y;
+                self.dir_z[i] = r.dir.z;
+                self.tnear[i] = r.tnear;
+                self.tfar[i] = r.tfar;
+                self.prim[i] = Hit::NONE;
+            }
+
+            /// The ray in lane `i`.
+            #[inline]
+            pub fn ray(&self, i: usize) -> Ray {
+                Ray {
+                    origin: Vec3::new(self.org_x[i], self.org_y[i], self.org_z[i]),
+                    dir: Vec3::new(self.dir_x[i], self.dir_y[i], self.dir_z[i]),
+                    tnear: self.tnear[i],
+                    tfar: self.tfar[i],
+                }
+            }
+
+            /// The hit in lane `i` after `intersect*` ([`Hit::MISS`] when nothing was hit).
+            #[inline]
+            pub fn hit(&self, i: usize) -> Hit {
+                if self.prim[i] == Hit::NONE {
+                    Hit::MISS
+                } else {
+                    Hit { t: self.tfar[i], u: self.u[i], v: self.v[i], prim: self.prim[i] }
+                }
+            }
+        }
+    };
+}
+
+ray_packet!(
+    /// Eight rays and their hits (AVX2 width).
+    RayPacket8,
+    8,
+    u8
+);
+ray_packet!(
+    /// Sixteen rays and their hits (AVX-512 width).
+    RayPacket16,
+    16,
+    u16
+);
+const _: () = assert!(std::mem::size_of::<RayPacket8>() == 11 * 32 + 32);
+const _: () = assert!(std::mem::size_of::<RayPacket16>() == 11 * 64);

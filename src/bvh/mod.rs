@@ -3,16 +3,30 @@
 //!
 //! * [`build_sah`] builds a binary BVH ([`Bvh2`]) with a binned surface area heuristic.
 //! * [`Bvh2`] is also the scalar reference traversal that faster kernels are tested against.
+//! * [`collapse`] turns it into the 8-wide [`Bvh8`] ([`Bvh8Node`], SoA leaf blocks) that the
+//!   SIMD kernels of [`traverse1`] (single rays) and [`traverse_packet`] (8/16-ray packets,
+//!   tiles of camera rays) traverse.
 
 pub mod build_sah;
 pub mod bvh2;
+pub mod bvh8;
+pub mod collapse;
+pub mod node;
 pub mod stats;
+pub mod traverse1;
+pub mod traverse_packet;
 pub mod validate;
 
 pub use build_sah::{BuildOptions, BuildPrim, BuildQuality, SplitMethod, build_bvh2};
 pub use bvh2::{Bvh2, Bvh2Node};
+pub use bvh8::{Bvh8, Bvh8Stats, DefaultTriBlock};
+pub use collapse::{CollapseMethod, CollapseOptions, PrimShape, collapse};
+pub use node::{Bvh8Node, LeafKind, NodeRef};
 pub use stats::BvhStats;
 
 /// No tree built here is deeper than this (the builder switches to median splits before
 /// reaching it), so fixed-size traversal stacks of `MAX_DEPTH` entries cannot overflow.
 pub const MAX_DEPTH: usize = 96;
+
+/// Entries of a BVH8 traversal stack: each level pushes at most 7 siblings.
+pub const BVH8_STACK: usize = 7 * MAX_DEPTH + 8;

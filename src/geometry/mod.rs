@@ -1,10 +1,15 @@
-//! Primitive intersectors: the scalar reference tests for triangles and spheres.
+//! Primitive intersectors: the scalar reference tests for triangles and spheres, and the
+//! SoA leaf blocks whose SIMD kernels are checked against them.
 //!
-//! These are the ground truth the SIMD kernels are checked against: simple, branchy and
-//! obviously correct rather than fast.
+//! The scalar tests are the ground truth: simple, branchy and obviously correct rather than
+//! fast. Each SIMD kernel performs the same operations in the same order, lane by lane.
 
 pub mod sphere;
+pub mod sphere_block;
+pub mod tri_block;
 pub mod triangle;
 
 pub use sphere::intersect_sphere;
-pub use triangle::intersect_triangle;
+pub use sphere_block::Sphere4;
+pub use tri_block::{Tri4, Tri8, TriBlock};
+pub use triangle::{intersect_triangle, intersect_triangle_edges};

@@ -18,8 +18,21 @@ pub fn intersect_triangle(
     v1: Vec3,
     v2: Vec3,
 ) -> Option<(f32, f32, f32)> {
-    let e1 = v1 - v0;
-    let e2 = v2 - v0;
+    intersect_triangle_edges(origin, dir, tnear, tfar, v0, v1 - v0, v2 - v0)
+}
+
+/// [`intersect_triangle`] for the triangle given as `v0` and its edges `e1 = v1 - v0`,
+/// `e2 = v2 - v0` (the form SIMD leaf blocks store). Bit-identical to it.
+#[inline]
+pub fn intersect_triangle_edges(
+    origin: Vec3,
+    dir: Vec3,
+    tnear: f32,
+    tfar: f32,
+    v0: Vec3,
+    e1: Vec3,
+    e2: Vec3,
+) -> Option<(f32, f32, f32)> {
     let p = dir.cross(e2);
     let det = e1.dot(p);
     if det == 0.0 || !det.is_finite() {

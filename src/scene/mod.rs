@@ -5,6 +5,7 @@ pub mod builder;
 pub mod camera;
 pub mod light;
 pub mod material;
+pub mod query;
 pub mod store;
 
 pub use builder::{CommitReport, SceneBuilder, SceneError};

@@ -2,7 +2,7 @@
 //!
 //! Primitive ids are scene-wide: triangles `0 .. num_triangles()`, then spheres.
 
-use crate::bvh::{Bvh2, BvhStats};
+use crate::bvh::{Bvh2, Bvh8, BvhStats, PrimShape};
 use crate::geometry::{intersect_sphere, intersect_triangle, sphere::sphere_uv};
 use crate::math::{Aabb, Vec3};
 use crate::ray::{Hit, Ray};
@@ -115,6 +115,7 @@ pub struct Scene {
     pub camera: Option<Camera>,
     pub(crate) bounds: Aabb,
     pub(crate) bvh2: Bvh2,
+    pub(crate) bvh8: Bvh8,
 }
 
 impl Scene {
@@ -152,6 +153,32 @@ impl Scene {
     /// The binary BVH (the scalar reference structure).
     pub fn bvh2(&self) -> &Bvh2 {
         &self.bvh2
+    }
+
+    /// The 8-wide BVH the SIMD kernels traverse.
+    pub fn bvh8(&self) -> &Bvh8 {
+        &self.bvh8
+    }
+
+    /// The shape of primitive `prim`, as the BVH8 collapse needs it.
+    pub fn prim_shape(&self, prim: u32) -> PrimShape {
+        let nt = self.triangles.len();
+        let p = prim as usize;
+        if p < nt {
+            PrimShape::Triangle(self.triangles.vertices(p))
+        } else {
+            PrimShape::Sphere(self.spheres.center[p - nt], self.spheres.radius[p - nt])
+        }
+    }
+
+    /// Fills in the surface coordinates of a sphere hit (the SIMD kernels leave them 0).
+    #[inline]
+    pub(crate) fn finish_hit(&self, ray: &Ray, hit: &mut Hit) {
+        let nt = self.triangles.len() as u32;
+        if hit.prim != Hit::NONE && hit.prim >= nt {
+            let center = self.spheres.center[(hit.prim - nt) as usize];
+            (hit.u, hit.v) = sphere_uv((ray.at(hit.t) - center).normalize());
+        }
     }
 
     /// Quality figures of the reference BVH.
@@ -212,16 +239,43 @@ impl Scene {
         hit
     }
 
-    /// Closest hit along `ray`.
+    /// Closest hit along `ray` (the BVH8 single-ray kernel). Invalid rays
+    /// ([`Ray::is_valid`]) miss.
+    ///
+    /// ```
+    /// # use raypack::{BuildOptions, Material, Ray, SceneBuilder, Vec3};
+    /// let mut b = SceneBuilder::new();
+    /// let m = b.add_material(Material::default());
+    /// b.add_mesh(&[Vec3::ZERO, Vec3::X, Vec3::Y], &[[0, 1, 2]], m)?;
+    /// let (scene, _) = b.commit(&BuildOptions::default());
+    /// let hit = scene.intersect1(&Ray::new(Vec3::new(0.25, 0.25, 2.0), -Vec3::Z));
+    /// assert_eq!((hit.prim, hit.t, hit.u, hit.v), (0, 2.0, 0.25, 0.25));
+    /// # Ok::<(), raypack::SceneError>(())
+    /// ```
     #[inline]
     pub fn intersect1(&self, ray: &Ray) -> Hit {
-        self.intersect1_reference(ray)
+        let mut hit = self.bvh8.intersect1(ray);
+        self.finish_hit(ray, &mut hit);
+        hit
     }
 
-    /// True when anything blocks `ray` over `(tnear, tfar]`.
+    /// True when anything blocks `ray` over `(tnear, tfar]` (the BVH8 any-hit kernel).
+    /// Invalid rays are never occluded.
+    ///
+    /// ```
+    /// # use raypack::{BuildOptions, Material, Ray, SceneBuilder, Vec3};
+    /// let mut b = SceneBuilder::new();
+    /// let m = b.add_material(Material::default());
+    /// b.add_sphere(Vec3::ZERO, 1.0, m)?;
+    /// let (scene, _) = b.commit(&BuildOptions::default());
+    /// let from = Vec3::new(0.0, 0.0, 5.0);
+    /// assert!(scene.occluded1(&Ray::segment(from, -Vec3::Z, 0.0, 10.0)));
+    /// assert!(!scene.occluded1(&Ray::segment(from, -Vec3::Z, 0.0, 3.9))); // stops short
+    /// # Ok::<(), raypack::SceneError>(())
+    /// ```
     #[inline]
     pub fn occluded1(&self, ray: &Ray) -> bool {
-        self.occluded1_reference(ray)
+        self.bvh8.occluded1(ray)
     }
 
     /// Local geometry at `hit` (which must be a hit of `ray` on this scene).

@@ -1,0 +1,136 @@
+//! The 8-wide BVH: nodes, triangle blocks and sphere blocks in flat arrays.
+
+use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
+use crate::geometry::{Sphere4, Tri4, TriBlock};
+
+/// The triangle block the scene uses: M = 4.
+///
+/// Measured (criterion, `benches/kernels.rs`, torus knot of 871k triangles, 1 thread,
+/// single-ray diffuse rays): see the comment at `Scene::commit` for the numbers that chose it.
+pub type DefaultTriBlock = Tri4;
+
+/// An 8-wide BVH with leaf blocks of `T`. `nodes[0]` is the root (always an inner node; an
+/// empty tree is a root with eight empty slots).
+#[derive(Clone, Debug)]
+pub struct Bvh8<T = DefaultTriBlock> {
+    /// Inner nodes; children of a node that are inner nodes are stored consecutively.
+    pub nodes: Vec<Bvh8Node>,
+    /// Triangle blocks; a leaf's blocks are consecutive.
+    pub tris: Vec<T>,
+    /// Sphere blocks.
+    pub spheres: Vec<Sphere4>,
+}
+
+impl<T: TriBlock> Default for Bvh8<T> {
+    fn default() -> Self {
+        Self { nodes: vec![Bvh8Node::EMPTY], tris: Vec::new(), spheres: Vec::new() }
+    }
+}
+
+/// Size and shape figures of a [`Bvh8`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Bvh8Stats {
+    /// Inner nodes.
+    pub nodes: usize,
+    /// Leaves (child slots holding blocks).
+    pub leaves: usize,
+    /// Triangle blocks.
+    pub tri_blocks: usize,
+    /// Sphere blocks.
+    pub sphere_blocks: usize,
+    /// Mean used child slots per node (of 8).
+    pub node_fill: f64,
+    /// Fraction of block lanes holding a primitive.
+    pub block_fill: f64,
+    /// Bytes of nodes and blocks.
+    pub bytes: usize,
+    /// SAH cost (unit node and block costs, relative to the root's area).
+    pub sah_cost: f64,
+    /// Deepest level of inner nodes (root = 1).
+    pub depth: usize,
+}
+
+impl std::fmt::Display for Bvh8Stats {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "SAH cost {:.2}, {} nodes ({:.2}/8 full), {} leaves, {} triangle + {} sphere blocks ({:.0}% full), depth {}, {:.1} MB",
+            self.sah_cost,
+            self.nodes,
+            self.node_fill,
+            self.leaves,
+            self.tri_blocks,
+            self.sphere_blocks,
+            self.block_fill * 100.0,
+            self.depth,
+            self.bytes as f64 / 1e6
+        )
+    }
+}
+
+impl<T: TriBlock> Bvh8<T> {
+    /// The root reference.
+    #[inline(always)]
+    pub fn root(&self) -> NodeRef {
+        NodeRef::inner(0)
+    }
+
+    /// Bytes of nodes and leaf blocks.
+    pub fn bytes(&self) -> usize {
+        std::mem::size_of_val(self.nodes.as_slice())
+            + std::mem::size_of_val(self.tris.as_slice())
+            + std::mem::size_of_val(self.spheres.as_slice())
+    }
+
+    /// Structure statistics.
+    pub fn stats(&self) -> Bvh8Stats {
+        let mut s = Bvh8Stats {
+            nodes: self.nodes.len(),
+            tri_blocks: self.tris.len(),
+            sphere_blocks: self.spheres.len(),
+            bytes: self.bytes(),
+            ..Default::default()
+        };
+        let root_area = self.nodes[0].bounds().half_area() as f64;
+        let norm = if root_area > 0.0 { 1.0 / root_area } else { 0.0 };
+        let mut used = 0usize;
+        let mut stack = vec![(0usize, 1usize)];
+        s.sah_cost = 1.0;
+        while let Some((i, d)) = stack.pop() {
+            s.depth = s.depth.max(d);
+            let n = &self.nodes[i];
+            for k in 0..8 {
+                let c = n.children[k];
+                if c.is_empty() {
+                    continue;
+                }
+                used += 1;
+                let a = n.child_bounds(k).half_area() as f64 * norm;
+                if c.is_leaf() {
+                    s.leaves += 1;
+                    s.sah_cost += a * c.block_count() as f64;
+                } else {
+                    s.sah_cost += a;
+                    stack.push((c.node_index(), d + 1));
+                }
+            }
+        }
+        s.node_fill = used as f64 / s.nodes.max(1) as f64;
+        let lanes = self.tris.len() * T::M + self.spheres.len() * Sphere4::M;
+        let full = self.tris.iter().map(|b| (0..T::M).filter(|&l| b.prim(l) != u32::MAX).count()).sum::<usize>()
+            + self.spheres.iter().map(|b| b.prim.iter().filter(|&&p| p != u32::MAX).count()).sum::<usize>();
+        s.block_fill = if lanes > 0 { full as f64 / lanes as f64 } else { 1.0 };
+        s
+    }
+
+    /// The primitive ids held by leaf `r`, padding lanes excluded.
+    pub fn leaf_prims(&self, r: NodeRef) -> Vec<u32> {
+        let range = r.first_block()..r.first_block() + r.block_count();
+        match r.kind() {
+            LeafKind::Triangles => {
+                self.tris[range].iter().flat_map(|b| (0..T::M).map(|l| b.prim(l))).filter(|&p| p != u32::MAX).collect()
+            }
+            LeafKind::Spheres => self.spheres[range].iter().flat_map(|b| b.prim).filter(|&p| p != u32::MAX).collect(),
+        }
+    }
+}

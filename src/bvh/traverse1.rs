@@ -1,0 +1,329 @@
+//! Single-ray traversal of the 8-wide BVH: one ray against the eight child boxes of a node
+//! per step, closest hit (`intersect1`) and any hit (`occluded1`).
+//!
+//! The node test is Embree's (Wald et al., "Embree: A Kernel Framework for Efficient CPU Ray
+//! Tracing", 2014; for 8 lanes Fuetterling et al., "Accelerated Single Ray Tracing for Wide
+//! Vector Units", HPG 2017): the ray's direction signs pick, once per ray, which row of the
+//! node holds each axis' near plane, so the branch-free slab test is
+//! `t_near = max((near - o) · 1/d)`, `t_far = min((far - o) · 1/d)` over the axes with no
+//! per-lane min/max of the two planes. Hit children are visited nearest first: with one hit
+//! child the traversal just descends, with two it compares, with more it pushes them and
+//! sorts the pushed entries by distance (popped entries farther than the closest hit so far
+//! are skipped).
+//!
+//! Leaves are runs of SoA blocks tested one ray against all M triangles at once
+//! ([`crate::geometry::tri_block`]).
+
+use crate::bvh::bvh2::SLAB_WIDEN;
+use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
+use crate::bvh::{BVH8_STACK, Bvh8};
+use crate::geometry::TriBlock;
+use crate::geometry::sphere_block::sphere_lanes;
+use crate::ray::{Hit, Ray};
+use crate::simd::{F32x4, F32x8, Lanes, Vec3x};
+use std::mem::MaybeUninit;
+
+/// Per-ray constants of the single-ray kernels.
+#[derive(Clone, Copy, Debug)]
+pub struct Ray1 {
+    /// The ray.
+    pub ray: Ray,
+    org: Vec3x<F32x8>,
+    inv: Vec3x<F32x8>,
+    tnear: F32x8,
+    /// Row of the node's bounds holding the near plane of each axis (the far one is `^ 1`).
+    near: [usize; 3],
+}
+
+impl Ray1 {
+    /// Precomputes the slab-test constants of `ray` (which must be valid).
+    #[inline(always)]
+    pub fn new(ray: &Ray) -> Self {
+        let inv = ray.inv_dir();
+        Self {
+            ray: *ray,
+            org: Vec3x::splat(ray.origin),
+            inv: Vec3x::splat(inv),
+            tnear: F32x8::splat(ray.tnear),
+            near: [(inv.x < 0.0) as usize, 2 + (inv.y < 0.0) as usize, 4 + (inv.z < 0.0) as usize],
+        }
+    }
+
+    /// Slab test against the eight child boxes of `n` over `(tnear, tfar]`: bit `i` of the mask
+    /// is set when child `i` is hit, and lane `i` of the result is its entry distance.
+    #[inline(always)]
+    pub fn intersect_node(&self, n: &Bvh8Node, tfar: f32) -> (u32, F32x8) {
+        let b = &n.bounds;
+        let tnx = (F32x8::load(&b[self.near[0]]) - self.org.x) * self.inv.x;
+        let tny = (F32x8::load(&b[self.near[1]]) - self.org.y) * self.inv.y;
+        let tnz = (F32x8::load(&b[self.near[2]]) - self.org.z) * self.inv.z;
+        let tfx = (F32x8::load(&b[self.near[0] ^ 1]) - self.org.x) * self.inv.x;
+        let tfy = (F32x8::load(&b[self.near[1] ^ 1]) - self.org.y) * self.inv.y;
+        let tfz = (F32x8::load(&b[self.near[2] ^ 1]) - self.org.z) * self.inv.z;
+        let tn = tnx.max(tny).max(tnz.max(self.tnear));
+        let tf = (tfx.min(tfy).min(tfz) * F32x8::splat(SLAB_WIDEN)).min(F32x8::splat(tfar));
+        (tn.le(tf).bitmask(), tn)
+    }
+
+    /// Scalar twin of [`Ray1::intersect_node`]: per slot, the near plane of each axis chosen
+    /// by the direction's sign, then the reference slab arithmetic.
+    pub fn intersect_node_scalar(&self, n: &Bvh8Node, tfar: f32) -> u32 {
+        let (o, inv) = (self.ray.origin, self.ray.inv_dir());
+        let mut mask = 0;
+        for i in 0..8 {
+            let b = n.child_bounds(i);
+            let (mut tn, mut tf) = (self.ray.tnear, f32::INFINITY);
+            for a in 0..3 {
+                let (near, far) = if inv[a] < 0.0 { (b.max[a], b.min[a]) } else { (b.min[a], b.max[a]) };
+                tn = tn.max((near - o[a]) * inv[a]);
+                tf = tf.min((far - o[a]) * inv[a]);
+            }
+            if tn <= (tf * SLAB_WIDEN).min(tfar) {
+                mask |= 1 << i;
+            }
+        }
+        mask
+    }
+}
+
+/// A fixed-capacity traversal stack of entries (node references, or references with
+/// extra data) with their entry distances.
+pub(crate) struct Stack<E: Copy = NodeRef> {
+    refs: [MaybeUninit<E>; BVH8_STACK],
+    dist: [MaybeUninit<f32>; BVH8_STACK],
+    len: usize,
+}
+
+impl<E: Copy> Stack<E> {
+    #[inline(always)]
+    pub(crate) fn new() -> Self {
+        Self { refs: [MaybeUninit::uninit(); BVH8_STACK], dist: [MaybeUninit::uninit(); BVH8_STACK], len: 0 }
+    }
+
+    #[inline(always)]
+    pub(crate) fn push(&mut self, r: E, d: f32) {
+        // Each level pushes at most 7 entries and the depth is bounded by MAX_DEPTH, so the
+        // capacity BVH8_STACK cannot be exceeded; the index check stays as a safety net.
+        self.refs[self.len] = MaybeUninit::new(r);
+        self.dist[self.len] = MaybeUninit::new(d);
+        self.len += 1;
+    }
+
+    #[inline(always)]
+    pub(crate) fn pop(&mut self) -> Option<(E, f32)> {
+        if self.len == 0 {
+            return None;
+        }
+        self.len -= 1;
+        // SAFETY: entries below `len` were all written by `push`.
+        unsafe { Some((self.refs[self.len].assume_init(), self.dist[self.len].assume_init())) }
+    }
+
+    /// Sorts the entries from `from` to the top by decreasing distance, so the nearest is
+    /// popped first (insertion sort: at most 8 entries).
+    #[inline(always)]
+    pub(crate) fn sort_top(&mut self, from: usize) {
+        for i in from + 1..self.len {
+            // SAFETY: entries below `len` were all written by `push`.
+            let (r, d) = unsafe { (self.refs[i].assume_init(), self.dist[i].assume_init()) };
+            let mut j = i;
+            // SAFETY: as above; from <= j - 1 < len.
+            while j > from && unsafe { self.dist[j - 1].assume_init() } < d {
+                self.refs[j] = self.refs[j - 1];
+                self.dist[j] = self.dist[j - 1];
+                j -= 1;
+            }
+            self.refs[j] = MaybeUninit::new(r);
+            self.dist[j] = MaybeUninit::new(d);
+        }
+    }
+}
+
+/// Pushes the hit children of `node` (mask `mask`, entry distances `dist`) as `entry(slot)`
+/// and returns the nearest one to descend into, the rest on `stack` nearest on top.
+#[inline(always)]
+pub(crate) fn order_children<E: Copy>(
+    mut mask: u32,
+    dist: F32x8,
+    stack: &mut Stack<E>,
+    entry: impl Fn(usize) -> E,
+) -> E {
+    let i0 = mask.trailing_zeros() as usize;
+    mask &= mask - 1;
+    if mask == 0 {
+        return entry(i0);
+    }
+    let i1 = mask.trailing_zeros() as usize;
+    mask &= mask - 1;
+    let d = dist.as_array();
+    if mask == 0 {
+        return if d[i0] <= d[i1] {
+            stack.push(entry(i1), d[i1]);
+            entry(i0)
+        } else {
+            stack.push(entry(i0), d[i0]);
+            entry(i1)
+        };
+    }
+    let base = stack.len;
+    stack.push(entry(i0), d[i0]);
+    stack.push(entry(i1), d[i1]);
+    while mask != 0 {
+        let i = mask.trailing_zeros() as usize;
+        mask &= mask - 1;
+        stack.push(entry(i), d[i]);
+    }
+    stack.sort_top(base);
+    stack.pop().expect("just pushed").0
+}
+
+impl<T: TriBlock> Bvh8<T> {
+    /// Closest hit along `ray` (invalid rays miss). Sphere hits carry `u = v = 0`; the scene
+    /// fills in their surface coordinates.
+    #[inline]
+    pub fn intersect1(&self, ray: &Ray) -> Hit {
+        let mut hit = Hit::MISS;
+        if ray.is_valid() {
+            let mut tfar = ray.tfar;
+            self.intersect1_from(&Ray1::new(ray), self.root(), &mut tfar, &mut hit);
+        }
+        hit
+    }
+
+    /// Closest-hit traversal of the subtree `start`, shrinking `tfar` and updating `hit` as
+    /// closer hits are found (the single-ray fallback of the packet kernels enters here).
+    #[inline]
+    pub fn intersect1_from(&self, r: &Ray1, start: NodeRef, tfar: &mut f32, hit: &mut Hit) {
+        let mut stack = Stack::<NodeRef>::new();
+        let org = Vec3x::<T::V>::splat(r.ray.origin);
+        let dir = Vec3x::<T::V>::splat(r.ray.dir);
+        let tnear = T::V::splat(r.ray.tnear);
+        let mut cur = start;
+        loop {
+            'descend: {
+                while !cur.is_leaf() {
+                    let node = &self.nodes[cur.node_index()];
+                    let (mask, dist) = r.intersect_node(node, *tfar);
+                    if mask == 0 {
+                        break 'descend;
+                    }
+                    cur = order_children(mask, dist, &mut stack, |i| node.children[i]);
+                }
+                self.intersect_leaf(cur, r, &org, &dir, tnear, tfar, hit);
+            }
+            loop {
+                match stack.pop() {
+                    None => return,
+                    Some((next, d)) if d <= *tfar => {
+                        cur = next;
+                        break;
+                    }
+                    Some(_) => {}
+                }
+            }
+        }
+    }
+
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn intersect_leaf(
+        &self,
+        leaf: NodeRef,
+        r: &Ray1,
+        org: &Vec3x<T::V>,
+        dir: &Vec3x<T::V>,
+        tnear: T::V,
+        tfar: &mut f32,
+        hit: &mut Hit,
+    ) {
+        let range = leaf.first_block()..leaf.first_block() + leaf.block_count();
+        match leaf.kind() {
+            LeafKind::Triangles => {
+                for block in &self.tris[range] {
+                    let h = block.intersect1(org, dir, tnear, T::V::splat(*tfar));
+                    if let Some(lane) = h.closest() {
+                        *tfar = h.t.lane(lane);
+                        *hit = Hit { t: *tfar, u: h.u.lane(lane), v: h.v.lane(lane), prim: block.prim(lane) };
+                    }
+                }
+            }
+            LeafKind::Spheres => {
+                for block in &self.spheres[range] {
+                    let (m, t) = sphere_lanes(
+                        &Vec3x::splat(r.ray.origin),
+                        &Vec3x::splat(r.ray.dir),
+                        F32x4::splat(r.ray.tnear),
+                        F32x4::splat(*tfar),
+                        &block.centers(),
+                        F32x4::load(&block.radius),
+                    );
+                    let mut bits = m.bitmask();
+                    while bits != 0 {
+                        let lane = bits.trailing_zeros() as usize;
+                        bits &= bits - 1;
+                        if t.lane(lane) <= *tfar {
+                            *tfar = t.lane(lane);
+                            *hit = Hit { t: *tfar, u: 0.0, v: 0.0, prim: block.prim[lane] };
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// True when anything lies in `(ray.tnear, ray.tfar]` (invalid rays are never occluded).
+    #[inline]
+    pub fn occluded1(&self, ray: &Ray) -> bool {
+        ray.is_valid() && self.occluded1_from(&Ray1::new(ray), self.root())
+    }
+
+    /// Any-hit traversal of the subtree `start`.
+    #[inline]
+    pub fn occluded1_from(&self, r: &Ray1, start: NodeRef) -> bool {
+        let mut stack = Stack::<NodeRef>::new();
+        let org = Vec3x::<T::V>::splat(r.ray.origin);
+        let dir = Vec3x::<T::V>::splat(r.ray.dir);
+        let (tnear, tfar) = (T::V::splat(r.ray.tnear), T::V::splat(r.ray.tfar));
+        let mut cur = start;
+        loop {
+            'descend: {
+                while !cur.is_leaf() {
+                    let node = &self.nodes[cur.node_index()];
+                    let (mut mask, _) = r.intersect_node(node, r.ray.tfar);
+                    if mask == 0 {
+                        break 'descend;
+                    }
+                    let first = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    while mask != 0 {
+                        let i = 31 - mask.leading_zeros() as usize;
+                        mask &= !(1 << i);
+                        stack.push(node.children[i], 0.0);
+                    }
+                    cur = node.children[first];
+                }
+                let range = cur.first_block()..cur.first_block() + cur.block_count();
+                match cur.kind() {
+                    LeafKind::Triangles => {
+                        for block in &self.tris[range] {
+                            if block.intersect1(&org, &dir, tnear, tfar).mask != 0 {
+                                return true;
+                            }
+                        }
+                    }
+                    LeafKind::Spheres => {
+                        for block in &self.spheres[range] {
+                            if block.intersect1(r.ray.origin, r.ray.dir, r.ray.tnear, r.ray.tfar).0 != 0 {
+                                return true;
+                            }
+                        }
+                    }
+                }
+            }
+            match stack.pop() {
+                None => return false,
+                Some((next, _)) => cur = next,
+            }
+        }
+    }
+}

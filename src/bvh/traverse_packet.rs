@@ -1,0 +1,677 @@
+//! Packet traversal of the 8-wide BVH: K = 8 or 16 rays at once, with active masks.
+//!
+//! Two schemes, both from Embree (Wald et al. 2014; Benthin et al., "Combining Single and
+//! Packet-Ray Tracing for Arbitrary Ray Distributions on the Intel MIC Architecture",
+//! IEEE TVCG 2012):
+//!
+//! * **Hybrid** ([`intersect_hybrid`], [`occluded_hybrid`]): each child box is tested against
+//!   all K rays (one ray per lane); a child is visited when any active ray hits it, and the
+//!   per-lane entry distances travel on the stack. When the rays still interested in a
+//!   subtree drop to `threshold` or fewer, each finishes that subtree alone with the
+//!   single-ray kernel ([`crate::bvh::traverse1`]).
+//! * **Frustum** ([`intersect_frustum`], [`occluded_frustum`]): for coherent rays whose
+//!   direction signs agree (camera rays of a tile, shadow rays toward one light), the whole
+//!   tile — P packets of K rays — is bounded by interval arithmetic on origins and reciprocal
+//!   directions, and each node costs one 8-wide box test for all of them, exactly as cheap as
+//!   one single ray's (Embree's "coherent" mode, Reshetov et al.'s "Multi-level ray tracing
+//!   algorithm", SIGGRAPH 2005). Leaves test each packet's lanes against the leaf box, then
+//!   the surviving lanes against each triangle (K rays vs one broadcast triangle).
+//!
+//! Every lane gets exactly the hit the single-ray kernel gives it: the box tests are
+//! conservative and the triangle test is the same bit-exact Möller–Trumbore.
+
+use crate::bvh::bvh2::SLAB_WIDEN;
+use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
+use crate::bvh::traverse1::{Ray1, Stack, order_children};
+use crate::bvh::{BVH8_STACK, Bvh8};
+use crate::geometry::TriBlock;
+use crate::geometry::sphere_block::sphere_lanes;
+use crate::geometry::tri_block::moller_trumbore;
+use crate::math::Vec3;
+use crate::ray::{Hit, Ray};
+use crate::simd::{F32x8, Lanes, Vec3x};
+use std::mem::MaybeUninit;
+
+/// K rays in lane form with their running closest hits.
+#[derive(Clone, Copy, Debug)]
+pub struct PacketRays<V> {
+    /// Origins.
+    pub org: Vec3x<V>,
+    /// Directions.
+    pub dir: Vec3x<V>,
+    /// Safe reciprocal directions.
+    pub inv: Vec3x<V>,
+    /// Interval starts.
+    pub tnear: V,
+    /// Interval ends, shrunk to the closest hit found so far.
+    pub tfar: V,
+    /// Hit coordinates.
+    pub u: V,
+    /// Hit coordinates.
+    pub v: V,
+    /// Hit primitive ids, as `f32` bit patterns (`u32::MAX` = none).
+    pub prim: V,
+    /// Lanes that are queried and valid (all-ones lanes).
+    pub active: V,
+}
+
+#[inline(always)]
+fn none_bits<V: Lanes>() -> V {
+    V::splat(f32::from_bits(Hit::NONE))
+}
+
+impl<V: Lanes> PacketRays<V> {
+    /// Lane form of `rays` (K = `V::LANES` entries); lanes whose bit is clear in `mask`, and
+    /// invalid rays, are inactive.
+    #[inline(always)]
+    pub fn new(rays: &[Ray], mask: u32) -> Self {
+        let k = V::LANES;
+        let mut buf = [[0.0f32; 16]; 9];
+        let mut act = [0.0f32; 16];
+        for i in 0..k {
+            let r = &rays[i];
+            let on = mask >> i & 1 != 0 && r.is_valid();
+            let inv = r.inv_dir();
+            let vals = [r.origin.x, r.origin.y, r.origin.z, r.dir.x, r.dir.y, r.dir.z, inv.x, inv.y, inv.z];
+            for (row, x) in buf.iter_mut().zip(vals) {
+                row[i] = x;
+            }
+            act[i] = if on { f32::from_bits(u32::MAX) } else { 0.0 };
+        }
+        let mut tn = [0.0f32; 16];
+        let mut tf = [0.0f32; 16];
+        for i in 0..k {
+            tn[i] = rays[i].tnear;
+            tf[i] = rays[i].tfar;
+        }
+        let row = |r: &[f32; 16]| V::load(r);
+        Self {
+            org: Vec3x { x: row(&buf[0]), y: row(&buf[1]), z: row(&buf[2]) },
+            dir: Vec3x { x: row(&buf[3]), y: row(&buf[4]), z: row(&buf[5]) },
+            inv: Vec3x { x: row(&buf[6]), y: row(&buf[7]), z: row(&buf[8]) },
+            tnear: V::load(&tn),
+            tfar: V::load(&tf),
+            u: V::splat(0.0),
+            v: V::splat(0.0),
+            prim: none_bits(),
+            active: V::load(&act),
+        }
+    }
+
+    /// Lane form of the rows of a `RayPacket8` / `RayPacket16`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    pub fn from_rows(org: [&[f32]; 3], dir: [&[f32]; 3], tnear: &[f32], tfar: &[f32], mask: u32) -> Self {
+        let k = V::LANES;
+        let mut act = [0.0f32; 16];
+        let mut inv = [[0.0f32; 16]; 3];
+        for i in 0..k {
+            let r = Ray {
+                origin: Vec3::new(org[0][i], org[1][i], org[2][i]),
+                dir: Vec3::new(dir[0][i], dir[1][i], dir[2][i]),
+                tnear: tnear[i],
+                tfar: tfar[i],
+            };
+            let on = mask >> i & 1 != 0 && r.is_valid();
+            act[i] = if on { f32::from_bits(u32::MAX) } else { 0.0 };
+            let iv = r.inv_dir();
+            inv[0][i] = iv.x;
+            inv[1][i] = iv.y;
+            inv[2][i] = iv.z;
+        }
+        Self {
+            org: Vec3x { x: V::load(org[0]), y: V::load(org[1]), z: V::load(org[2]) },
+            dir: Vec3x { x: V::load(dir[0]), y: V::load(dir[1]), z: V::load(dir[2]) },
+            inv: Vec3x { x: V::load(&inv[0]), y: V::load(&inv[1]), z: V::load(&inv[2]) },
+            tnear: V::load(tnear),
+            tfar: V::load(tfar),
+            u: V::splat(0.0),
+            v: V::splat(0.0),
+            prim: none_bits(),
+            active: V::load(&act),
+        }
+    }
+
+    /// Bit mask of the active lanes.
+    #[inline(always)]
+    pub fn active_mask(&self) -> u32 {
+        self.active.bitmask()
+    }
+
+    /// The single ray of lane `i` (with its current `tfar`).
+    #[inline(always)]
+    pub fn ray(&self, i: usize) -> Ray {
+        Ray { origin: self.org.lane(i), dir: self.dir.lane(i), tnear: self.tnear.lane(i), tfar: self.tfar.lane(i) }
+    }
+
+    /// The hit of lane `i` ([`Hit::MISS`] when none).
+    #[inline(always)]
+    pub fn hit(&self, i: usize) -> Hit {
+        let prim = self.prim.lane(i).to_bits();
+        if prim == Hit::NONE {
+            Hit::MISS
+        } else {
+            Hit { t: self.tfar.lane(i), u: self.u.lane(i), v: self.v.lane(i), prim }
+        }
+    }
+
+    /// Writes lane `i`'s hit (from a single-ray fallback).
+    #[inline(always)]
+    fn set_lane(&mut self, i: usize, tfar: f32, hit: &Hit) {
+        let mut a = [[0.0f32; 16]; 4];
+        self.tfar.store(&mut a[0]);
+        self.u.store(&mut a[1]);
+        self.v.store(&mut a[2]);
+        self.prim.store(&mut a[3]);
+        a[0][i] = tfar;
+        if hit.is_hit() {
+            a[1][i] = hit.u;
+            a[2][i] = hit.v;
+            a[3][i] = f32::from_bits(hit.prim);
+        }
+        self.tfar = V::load(&a[0]);
+        self.u = V::load(&a[1]);
+        self.v = V::load(&a[2]);
+        self.prim = V::load(&a[3]);
+    }
+
+    /// Per-lane slab test against box `i` of `node`: `(hit lanes, entry distances)`.
+    #[inline(always)]
+    pub fn intersect_box(&self, node: &Bvh8Node, i: usize) -> (V, V) {
+        let b = &node.bounds;
+        let t0x = (V::splat(b[0][i]) - self.org.x) * self.inv.x;
+        let t1x = (V::splat(b[1][i]) - self.org.x) * self.inv.x;
+        let t0y = (V::splat(b[2][i]) - self.org.y) * self.inv.y;
+        let t1y = (V::splat(b[3][i]) - self.org.y) * self.inv.y;
+        let t0z = (V::splat(b[4][i]) - self.org.z) * self.inv.z;
+        let t1z = (V::splat(b[5][i]) - self.org.z) * self.inv.z;
+        let tn = t0x.min(t1x).max(t0y.min(t1y)).max(t0z.min(t1z).max(self.tnear));
+        let tf = (t0x.max(t1x).min(t0y.max(t1y)).min(t0z.max(t1z)) * V::splat(SLAB_WIDEN)).min(self.tfar);
+        (tn.le(tf), tn)
+    }
+
+    /// Tests the `active` lanes against the primitives of `leaf`, keeping the closest hits.
+    #[inline(always)]
+    fn intersect_leaf<T: TriBlock>(&mut self, bvh: &Bvh8<T>, leaf: NodeRef, active: V) {
+        let range = leaf.first_block()..leaf.first_block() + leaf.block_count();
+        match leaf.kind() {
+            LeafKind::Triangles => {
+                for block in &bvh.tris[range] {
+                    for lane in 0..T::M {
+                        let prim = block.prim(lane);
+                        if prim == u32::MAX {
+                            break;
+                        }
+                        let [v0, e1, e2] = block.lane_edges(lane);
+                        let (m, t, u, v) = moller_trumbore(
+                            &self.org,
+                            &self.dir,
+                            self.tnear,
+                            self.tfar,
+                            &Vec3x::splat(v0),
+                            &Vec3x::splat(e1),
+                            &Vec3x::splat(e2),
+                        );
+                        let m = m & active;
+                        if m.bitmask() != 0 {
+                            self.tfar = m.select(t, self.tfar);
+                            self.u = m.select(u, self.u);
+                            self.v = m.select(v, self.v);
+                            self.prim = m.select(V::splat(f32::from_bits(prim)), self.prim);
+                        }
+                    }
+                }
+            }
+            LeafKind::Spheres => {
+                for block in &bvh.spheres[range] {
+                    for lane in 0..4 {
+                        let prim = block.prim[lane];
+                        if prim == u32::MAX {
+                            break;
+                        }
+                        let c = Vec3x::splat(block.center(lane));
+                        let (m, t) =
+                            sphere_lanes(&self.org, &self.dir, self.tnear, self.tfar, &c, V::splat(block.radius[lane]));
+                        let m = m & active;
+                        if m.bitmask() != 0 {
+                            self.tfar = m.select(t, self.tfar);
+                            self.u = m.select(V::splat(0.0), self.u);
+                            self.v = m.select(V::splat(0.0), self.v);
+                            self.prim = m.select(V::splat(f32::from_bits(prim)), self.prim);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The `active` lanes that hit anything in `leaf` over their interval.
+    #[inline(always)]
+    fn occluded_leaf<T: TriBlock>(&self, bvh: &Bvh8<T>, leaf: NodeRef, active: V) -> V {
+        let mut occ = V::splat(0.0);
+        let range = leaf.first_block()..leaf.first_block() + leaf.block_count();
+        match leaf.kind() {
+            LeafKind::Triangles => {
+                for block in &bvh.tris[range] {
+                    for lane in 0..T::M {
+                        if block.prim(lane) == u32::MAX {
+                            break;
+                        }
+                        let [v0, e1, e2] = block.lane_edges(lane);
+                        let (m, ..) = moller_trumbore(
+                            &self.org,
+                            &self.dir,
+                            self.tnear,
+                            self.tfar,
+                            &Vec3x::splat(v0),
+                            &Vec3x::splat(e1),
+                            &Vec3x::splat(e2),
+                        );
+                        occ = occ | (m & active);
+                        if (active & !occ).bitmask() == 0 {
+                            return occ;
+                        }
+                    }
+                }
+            }
+            LeafKind::Spheres => {
+                for block in &bvh.spheres[range] {
+                    for lane in 0..4 {
+                        if block.prim[lane] == u32::MAX {
+                            break;
+                        }
+                        let c = Vec3x::splat(block.center(lane));
+                        let (m, _) =
+                            sphere_lanes(&self.org, &self.dir, self.tnear, self.tfar, &c, V::splat(block.radius[lane]));
+                        occ = occ | (m & active);
+                    }
+                }
+            }
+        }
+        occ
+    }
+}
+
+/// A stack of node references with per-lane entry distances.
+struct PacketStack<V> {
+    refs: [MaybeUninit<NodeRef>; BVH8_STACK],
+    dist: [MaybeUninit<V>; BVH8_STACK],
+    len: usize,
+}
+
+impl<V: Lanes> PacketStack<V> {
+    #[inline(always)]
+    fn new() -> Self {
+        Self { refs: [MaybeUninit::uninit(); BVH8_STACK], dist: [MaybeUninit::uninit(); BVH8_STACK], len: 0 }
+    }
+    #[inline(always)]
+    fn push(&mut self, r: NodeRef, d: V) {
+        self.refs[self.len] = MaybeUninit::new(r);
+        self.dist[self.len] = MaybeUninit::new(d);
+        self.len += 1;
+    }
+    #[inline(always)]
+    fn pop(&mut self) -> Option<(NodeRef, V)> {
+        if self.len == 0 {
+            return None;
+        }
+        self.len -= 1;
+        // SAFETY: entries below `len` were all written by `push`.
+        unsafe { Some((self.refs[self.len].assume_init(), self.dist[self.len].assume_init())) }
+    }
+}
+
+/// Hybrid closest-hit traversal of the active lanes of `rays`. Subtrees wanted by at most
+/// `threshold` lanes are finished lane by lane with the single-ray kernel.
+pub fn intersect_hybrid<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, rays: &mut PacketRays<V>, threshold: usize) {
+    let inf = V::splat(f32::INFINITY);
+    let mut stack = PacketStack::<V>::new();
+    stack.push(bvh.root(), rays.active.select(rays.tnear, inf));
+    'pop: while let Some((mut cur, mut cur_dist)) = stack.pop() {
+        let mut active = cur_dist.le(rays.tfar) & rays.active;
+        loop {
+            let bits = active.bitmask();
+            if bits == 0 {
+                continue 'pop;
+            }
+            if (bits.count_ones() as usize) <= threshold {
+                for i in crate::simd::bits(bits) {
+                    let r = rays.ray(i);
+                    let mut tfar = r.tfar;
+                    let mut hit = Hit::MISS;
+                    bvh.intersect1_from(&Ray1::new(&r), cur, &mut tfar, &mut hit);
+                    if hit.is_hit() {
+                        rays.set_lane(i, tfar, &hit);
+                    }
+                }
+                continue 'pop;
+            }
+            if cur.is_leaf() {
+                break;
+            }
+            let node = &bvh.nodes[cur.node_index()];
+            let mut next = NodeRef::EMPTY;
+            let mut next_dist = inf;
+            for i in 0..8 {
+                let child = node.children[i];
+                if child.is_empty() {
+                    break;
+                }
+                let (m, tn) = rays.intersect_box(node, i);
+                let m = m & active;
+                if m.bitmask() == 0 {
+                    continue;
+                }
+                let d = m.select(tn, inf);
+                if next.is_empty() {
+                    (next, next_dist) = (child, d);
+                } else if d.lt(next_dist).bitmask() != 0 {
+                    stack.push(next, next_dist);
+                    (next, next_dist) = (child, d);
+                } else {
+                    stack.push(child, d);
+                }
+            }
+            if next.is_empty() {
+                continue 'pop;
+            }
+            cur = next;
+            cur_dist = next_dist;
+            active = cur_dist.le(rays.tfar) & rays.active;
+        }
+        rays.intersect_leaf(bvh, cur, active);
+    }
+}
+
+/// Hybrid any-hit traversal; returns the mask of occluded lanes (all-ones lanes).
+pub fn occluded_hybrid<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, rays: &PacketRays<V>, threshold: usize) -> V {
+    let inf = V::splat(f32::INFINITY);
+    let mut occluded = V::splat(0.0);
+    let mut stack = PacketStack::<V>::new();
+    stack.push(bvh.root(), rays.active.select(rays.tnear, inf));
+    'pop: while let Some((mut cur, cur_dist)) = stack.pop() {
+        let mut active = cur_dist.le(rays.tfar) & rays.active & !occluded;
+        loop {
+            let bits = active.bitmask();
+            if bits == 0 {
+                continue 'pop;
+            }
+            if (bits.count_ones() as usize) <= threshold {
+                let mut occ = [0.0f32; 16];
+                occluded.store(&mut occ);
+                for i in crate::simd::bits(bits) {
+                    if bvh.occluded1_from(&Ray1::new(&rays.ray(i)), cur) {
+                        occ[i] = f32::from_bits(u32::MAX);
+                    }
+                }
+                occluded = V::load(&occ);
+                if (rays.active & !occluded).bitmask() == 0 {
+                    return occluded;
+                }
+                continue 'pop;
+            }
+            if cur.is_leaf() {
+                break;
+            }
+            let node = &bvh.nodes[cur.node_index()];
+            let mut next = NodeRef::EMPTY;
+            let mut next_active = active;
+            for i in 0..8 {
+                let child = node.children[i];
+                if child.is_empty() {
+                    break;
+                }
+                let (m, tn) = rays.intersect_box(node, i);
+                let m = m & active;
+                if m.bitmask() == 0 {
+                    continue;
+                }
+                if next.is_empty() {
+                    next = child;
+                    next_active = m;
+                } else {
+                    stack.push(child, m.select(tn, inf));
+                }
+            }
+            if next.is_empty() {
+                continue 'pop;
+            }
+            cur = next;
+            active = next_active;
+        }
+        occluded = occluded | rays.occluded_leaf(bvh, cur, active);
+        if (rays.active & !occluded).bitmask() == 0 {
+            return occluded;
+        }
+    }
+    occluded
+}
+
+/// The bounds, by interval arithmetic, of a tile of coherent rays whose direction signs
+/// agree on every axis: one 8-wide box test then answers "could any ray of the tile hit this
+/// child" for all of them (conservatively: see [`Frustum::new`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Frustum {
+    near: [usize; 3],
+    near_org: Vec3x<F32x8>,
+    far_org: Vec3x<F32x8>,
+    near_rdir: Vec3x<F32x8>,
+    far_rdir: Vec3x<F32x8>,
+    tnear: F32x8,
+    /// Largest `tfar` of the tile's active rays.
+    pub tfar: f32,
+}
+
+impl Frustum {
+    /// The frustum of the active lanes of `packets`, or `None` when no lane is active or the
+    /// direction signs differ on some axis.
+    ///
+    /// Per axis with reciprocal directions in `[i_lo, i_hi]` (same sign) and origins in
+    /// `[o_lo, o_hi]`: the near plane `n` is entered no earlier than `(n - o') · i'` where
+    /// `o'` is the origin bound on the far side (`o_hi` for positive directions) and `i'` the
+    /// reciprocal of smallest magnitude; the far plane `f` is left no later than
+    /// `(f - o'') · i''` with the other bounds. Rounding is monotone in each operand, so these
+    /// bound the per-ray values computed by [`PacketRays::intersect_box`] and
+    /// [`Ray1::intersect_node`] in floating point too. A negative bound is not tight, but the
+    /// interval starts at `tnear >= 0`, which makes it harmless.
+    pub fn new<V: Lanes>(packets: &[PacketRays<V>]) -> Option<Self> {
+        let mut lo = [f32::INFINITY; 9];
+        let mut hi = [f32::NEG_INFINITY; 9];
+        let (mut tn, mut tf) = (f32::INFINITY, f32::NEG_INFINITY);
+        for p in packets {
+            let m = p.active.bitmask();
+            if m == 0 {
+                continue;
+            }
+            let rows = [p.org.x, p.org.y, p.org.z, p.inv.x, p.inv.y, p.inv.z];
+            for (k, row) in rows.iter().enumerate() {
+                let on = p.active.select(*row, V::splat(f32::INFINITY));
+                lo[k] = lo[k].min(on.reduce_min());
+                let on = p.active.select(*row, V::splat(f32::NEG_INFINITY));
+                hi[k] = hi[k].max(on.reduce_max());
+            }
+            tn = tn.min(p.active.select(p.tnear, V::splat(f32::INFINITY)).reduce_min());
+            tf = tf.max(p.active.select(p.tfar, V::splat(f32::NEG_INFINITY)).reduce_max());
+        }
+        if tn == f32::INFINITY {
+            return None;
+        }
+        let mut near = [0; 3];
+        let mut near_org = [0.0; 3];
+        let mut far_org = [0.0; 3];
+        let mut near_rdir = [0.0; 3];
+        let mut far_rdir = [0.0; 3];
+        for a in 0..3 {
+            let (ilo, ihi) = (lo[3 + a], hi[3 + a]);
+            let (olo, ohi) = (lo[a], hi[a]);
+            if ilo >= 0.0 {
+                near[a] = 2 * a;
+                (near_org[a], far_org[a]) = (ohi, olo);
+                (near_rdir[a], far_rdir[a]) = (ilo, ihi);
+            } else if ihi < 0.0 {
+                near[a] = 2 * a + 1;
+                (near_org[a], far_org[a]) = (olo, ohi);
+                (near_rdir[a], far_rdir[a]) = (ihi, ilo);
+            } else {
+                return None;
+            }
+        }
+        let v = |x: [f32; 3]| Vec3x { x: F32x8::splat(x[0]), y: F32x8::splat(x[1]), z: F32x8::splat(x[2]) };
+        Some(Self {
+            near,
+            near_org: v(near_org),
+            far_org: v(far_org),
+            near_rdir: v(near_rdir),
+            far_rdir: v(far_rdir),
+            tnear: F32x8::splat(tn),
+            tfar: tf,
+        })
+    }
+
+    /// Could any ray of the tile hit the children of `n` before `self.tfar`? Returns the mask
+    /// of such children and lower bounds of their entry distances.
+    #[inline(always)]
+    pub fn intersect_node(&self, n: &Bvh8Node) -> (u32, F32x8) {
+        let b = &n.bounds;
+        let tnx = (F32x8::load(&b[self.near[0]]) - self.near_org.x) * self.near_rdir.x;
+        let tny = (F32x8::load(&b[self.near[1]]) - self.near_org.y) * self.near_rdir.y;
+        let tnz = (F32x8::load(&b[self.near[2]]) - self.near_org.z) * self.near_rdir.z;
+        let tfx = (F32x8::load(&b[self.near[0] ^ 1]) - self.far_org.x) * self.far_rdir.x;
+        let tfy = (F32x8::load(&b[self.near[1] ^ 1]) - self.far_org.y) * self.far_rdir.y;
+        let tfz = (F32x8::load(&b[self.near[2] ^ 1]) - self.far_org.z) * self.far_rdir.z;
+        let tn = tnx.max(tny).max(tnz.max(self.tnear));
+        let tf = (tfx.min(tfy).min(tfz) * F32x8::splat(SLAB_WIDEN)).min(F32x8::splat(self.tfar));
+        (tn.le(tf).bitmask(), tn)
+    }
+}
+
+/// A stack entry of the frustum traversal: the reference and where its box lives (parent
+/// node and slot), for the per-lane box test at leaves.
+#[derive(Clone, Copy)]
+struct TileEntry {
+    node: NodeRef,
+    parent: u32,
+    slot: u32,
+}
+
+/// Closest-hit traversal of a tile of coherent packets with one frustum test per node
+/// (falls back to [`intersect_hybrid`] per packet when the direction signs disagree).
+pub fn intersect_frustum<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, packets: &mut [PacketRays<V>], threshold: usize) {
+    let Some(mut fr) = Frustum::new(packets) else {
+        for p in packets.iter_mut() {
+            if p.active_mask() != 0 {
+                intersect_hybrid(bvh, p, threshold);
+            }
+        }
+        return;
+    };
+    let mut stack = Stack::<TileEntry>::new();
+    let mut cur = TileEntry { node: bvh.root(), parent: u32::MAX, slot: 0 };
+    loop {
+        'descend: {
+            while !cur.node.is_leaf() {
+                let idx = cur.node.node_index();
+                let node = &bvh.nodes[idx];
+                let (mask, dist) = fr.intersect_node(node);
+                if mask == 0 {
+                    break 'descend;
+                }
+                cur = order_children(mask, dist, &mut stack, |i| TileEntry {
+                    node: node.children[i],
+                    parent: idx as u32,
+                    slot: i as u32,
+                });
+            }
+            let parent = &bvh.nodes[cur.parent as usize];
+            let mut new_far = f32::NEG_INFINITY;
+            for p in packets.iter_mut() {
+                if p.active.bitmask() == 0 {
+                    continue;
+                }
+                let (m, _) = p.intersect_box(parent, cur.slot as usize);
+                let m = m & p.active;
+                if m.bitmask() != 0 {
+                    p.intersect_leaf(bvh, cur.node, m);
+                }
+                new_far = new_far.max(p.active.select(p.tfar, V::splat(f32::NEG_INFINITY)).reduce_max());
+            }
+            fr.tfar = new_far;
+        }
+        loop {
+            match stack.pop() {
+                None => return,
+                Some((next, d)) if d <= fr.tfar => {
+                    cur = next;
+                    break;
+                }
+                Some(_) => {}
+            }
+        }
+    }
+}
+
+/// Any-hit traversal of a tile of coherent packets with one frustum test per node; returns
+/// the occluded lanes of each packet as bit masks.
+pub fn occluded_frustum<V: Lanes, T: TriBlock>(
+    bvh: &Bvh8<T>,
+    packets: &[PacketRays<V>],
+    threshold: usize,
+    out: &mut [u32],
+) {
+    let Some(fr) = Frustum::new(packets) else {
+        for (p, o) in packets.iter().zip(out.iter_mut()) {
+            *o = if p.active_mask() != 0 { occluded_hybrid(bvh, p, threshold).bitmask() } else { 0 };
+        }
+        return;
+    };
+    let mut occluded: [V; 64] = [V::splat(0.0); 64];
+    let n = packets.len();
+    assert!(n <= 64, "at most 64 packets per tile");
+    let mut stack = Stack::<TileEntry>::new();
+    let mut remaining: u32 = packets.iter().map(|p| p.active_mask().count_ones()).sum();
+    let mut cur = TileEntry { node: bvh.root(), parent: u32::MAX, slot: 0 };
+    'outer: loop {
+        'descend: {
+            while !cur.node.is_leaf() {
+                let idx = cur.node.node_index();
+                let node = &bvh.nodes[idx];
+                let (mut mask, _) = fr.intersect_node(node);
+                if mask == 0 {
+                    break 'descend;
+                }
+                let first = mask.trailing_zeros();
+                mask &= mask - 1;
+                while mask != 0 {
+                    let i = 31 - mask.leading_zeros();
+                    mask &= !(1 << i);
+                    stack.push(TileEntry { node: node.children[i as usize], parent: idx as u32, slot: i }, 0.0);
+                }
+                cur = TileEntry { node: node.children[first as usize], parent: idx as u32, slot: first };
+            }
+            let parent = &bvh.nodes[cur.parent as usize];
+            for (p, occ) in packets.iter().zip(occluded.iter_mut()) {
+                let act = p.active & !*occ;
+                if act.bitmask() == 0 {
+                    continue;
+                }
+                let (m, _) = p.intersect_box(parent, cur.slot as usize);
+                let m = m & act;
+                if m.bitmask() != 0 {
+                    let o = p.occluded_leaf(bvh, cur.node, m);
+                    remaining -= o.bitmask().count_ones();
+                    *occ = *occ | o;
+                }
+            }
+            if remaining == 0 {
+                break 'outer;
+            }
+        }
+        match stack.pop() {
+            None => break,
+            Some((next, _)) => cur = next,
+        }
+    }
+    for (o, occ) in out.iter_mut().zip(occluded.iter()).take(n) {
+        *o = occ.bitmask();
+    }
+}

@@ -1,0 +1,251 @@
+//! The 8-wide BVH: structural invariants, and every BVH8 kernel (single ray, 8/16-ray
+//! packets, tiles, streams) answering exactly what the reference BVH2 and brute force answer.
+
+mod common;
+
+use common::{random_rays, scene_of};
+use raypack::bvh::validate::validate_bvh8;
+use raypack::bvh::{Bvh8, CollapseMethod, CollapseOptions, collapse};
+use raypack::generate::{grid, random_soup, uv_sphere};
+use raypack::geometry::{Tri4, Tri8, TriBlock};
+use raypack::render::sampler::Rng;
+use raypack::{BuildOptions, Camera, Hit, Ray, RayPacket8, RayPacket16, Scene, Vec3};
+
+fn prim_bounds(scene: &Scene) -> Vec<raypack::Aabb> {
+    (0..scene.num_prims() as u32).map(|p| scene.prim_bounds(p)).collect()
+}
+
+/// Same hit as the reference: identical `t` bits, and the same primitive unless another one
+/// is hit at exactly that distance.
+fn same_hit(scene: &Scene, ray: &Ray, got: &Hit, want: &Hit, what: &str) {
+    assert_eq!(got.is_hit(), want.is_hit(), "{what}: {ray:?}: got {got:?} want {want:?}");
+    if !want.is_hit() {
+        return;
+    }
+    assert_eq!(got.t.to_bits(), want.t.to_bits(), "{what}: {ray:?}: t {} vs {}", got.t, want.t);
+    if got.prim != want.prim {
+        let other = scene.intersect_prim(got.prim, ray, ray.tfar).expect("reported prim is hit");
+        assert_eq!(other.0.to_bits(), want.t.to_bits(), "{what}: prim {} vs {}", got.prim, want.prim);
+    } else {
+        assert_eq!((got.u.to_bits(), got.v.to_bits()), (want.u.to_bits(), want.v.to_bits()), "{what}: u, v");
+    }
+}
+
+/// Checks every kernel against the reference on `rays`; returns the number of hits.
+fn check_kernels(scene: &Scene, rays: &[Ray], what: &str) -> usize {
+    validate_bvh8(scene.bvh8(), &prim_bounds(scene)).unwrap_or_else(|e| panic!("{what}: invalid BVH8: {e}"));
+    let want: Vec<Hit> = rays.iter().map(|r| scene.intersect1_reference(r)).collect();
+    let want_occ: Vec<bool> = rays.iter().map(|r| scene.occluded1_reference(r)).collect();
+    let mut hits = 0;
+    for (i, r) in rays.iter().enumerate() {
+        same_hit(scene, r, &scene.intersect1(r), &want[i], &format!("{what} intersect1 ray {i}"));
+        assert_eq!(scene.occluded1(r), want_occ[i], "{what} occluded1 ray {i} {r:?}");
+        hits += want[i].is_hit() as usize;
+    }
+    // Packets with a different partial mask each time.
+    let mut rng = Rng::new(7, 7);
+    for (c, chunk) in rays.chunks(16).enumerate() {
+        let (mut p16, full) = RayPacket16::from_rays(chunk);
+        let mask = if c % 3 == 0 { full } else { full & rng.next_u32() as u16 };
+        let before = p16;
+        scene.intersect16(&mut p16, mask);
+        let occ = scene.occluded16(&before, mask);
+        for i in 0..chunk.len() {
+            let k = c * 16 + i;
+            if mask >> i & 1 == 1 {
+                same_hit(scene, &rays[k], &p16.hit(i), &want[k], &format!("{what} intersect16 ray {k}"));
+                assert_eq!(occ >> i & 1 == 1, want_occ[k], "{what} occluded16 ray {k}");
+            } else {
+                let bits = |p: &RayPacket16| (format!("{:?}", p.ray(i)), p.prim[i], p.u[i].to_bits(), p.v[i].to_bits());
+                assert_eq!(bits(&p16), bits(&before), "inactive lane written");
+                assert_eq!(occ >> i & 1, 0);
+            }
+        }
+        for half in 0..2 {
+            let sub = &chunk[(half * 8).min(chunk.len())..((half + 1) * 8).min(chunk.len())];
+            if sub.is_empty() {
+                continue;
+            }
+            let (mut p8, full8) = RayPacket8::from_rays(sub);
+            let mask8 = if c % 2 == 0 { full8 } else { full8 & rng.next_u32() as u8 };
+            let before = p8;
+            scene.intersect8(&mut p8, mask8);
+            let occ = scene.occluded8(&before, mask8);
+            for i in 0..sub.len() {
+                let k = c * 16 + half * 8 + i;
+                if mask8 >> i & 1 == 1 {
+                    same_hit(scene, &rays[k], &p8.hit(i), &want[k], &format!("{what} intersect8 ray {k}"));
+                    assert_eq!(occ >> i & 1 == 1, want_occ[k], "{what} occluded8 ray {k}");
+                }
+            }
+        }
+    }
+    // Streams (tiles and single rays, over rayon).
+    let mut got = vec![Hit::MISS; rays.len()];
+    scene.intersect_stream(rays, &mut got);
+    let mut occ = vec![false; rays.len()];
+    scene.occluded_stream(rays, &mut occ);
+    for (i, r) in rays.iter().enumerate() {
+        same_hit(scene, r, &got[i], &want[i], &format!("{what} stream ray {i}"));
+        assert_eq!(occ[i], want_occ[i], "{what} occluded_stream ray {i}");
+    }
+    hits
+}
+
+/// Camera rays over the scene in 4 x 4 pixel tiles (the coherent case).
+fn camera_rays(scene: &Scene, w: usize, h: usize) -> Vec<Ray> {
+    let cam: Camera = scene.camera_or_framing(w as f32 / h as f32);
+    let mut rays = Vec::with_capacity(w * h);
+    for ty in (0..h).step_by(4) {
+        for tx in (0..w).step_by(4) {
+            for y in ty..(ty + 4).min(h) {
+                for x in tx..(tx + 4).min(w) {
+                    rays.push(cam.generate_ray((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32));
+                }
+            }
+        }
+    }
+    rays
+}
+
+/// Shadow rays from the reference hits of `primary` toward a point above the scene.
+fn shadow_rays(scene: &Scene, primary: &[Ray]) -> Vec<Ray> {
+    let b = scene.bounds();
+    let light = b.center() + Vec3::new(0.0, b.extent().y * 1.5 + 0.1, 0.0);
+    primary
+        .iter()
+        .filter_map(|r| {
+            let h = scene.intersect1_reference(r);
+            h.is_hit().then(|| {
+                let p = r.at(h.t);
+                let d = light - p;
+                Ray::segment(p, d, 1e-3, 1.0 - 1e-4)
+            })
+        })
+        .collect()
+}
+
+#[test]
+fn soups_over_leaf_sizes_and_block_widths() {
+    let mut total = 0;
+    for (seed, leaf) in [(1u64, 1usize), (2, 4), (3, 8)] {
+        let soup = random_soup(3000, 0.08, seed);
+        let opts = BuildOptions { max_leaf_size: leaf, ..BuildOptions::default() };
+        let scene = scene_of(&[&soup], &[], &opts);
+        let rays = random_rays(&scene, 40_000, seed);
+        let hits = check_kernels(&scene, &rays, &format!("soup leaf {leaf}"));
+        assert!(hits > rays.len() / 20, "too few hits ({hits})");
+        total += rays.len();
+    }
+    assert!(total >= 100_000);
+}
+
+#[test]
+fn shared_edges_spheres_and_coherent_rays() {
+    let g = grid(60, 60).map_positions(|p| p + Vec3::new(0.0, 0.0, -0.5));
+    let s = uv_sphere(40, 60).map_positions(|p| p * 0.4 + Vec3::new(0.3, 0.0, 0.2));
+    let spheres = [(Vec3::new(-0.5, 0.5, 0.0), 0.3), (Vec3::new(0.5, -0.5, 0.3), 0.2), (Vec3::new(0.3, 0.0, 0.2), 0.1)];
+    let scene = scene_of(&[&g, &s], &spheres, &BuildOptions::default());
+    check_kernels(&scene, &random_rays(&scene, 60_000, 9), "grid+sphere random");
+    let cam = camera_rays(&scene, 160, 120);
+    let hits = check_kernels(&scene, &cam, "grid+sphere camera");
+    assert!(hits > cam.len() / 10, "{hits} of {} camera rays hit", cam.len());
+    let shadow = shadow_rays(&scene, &cam);
+    check_kernels(&scene, &shadow, "grid+sphere shadow");
+    // Rays exactly through grid vertices and edge midpoints, straight down.
+    let mut rays = Vec::new();
+    for p in &g.positions {
+        rays.push(Ray::new(*p + Vec3::new(0.0, 0.0, 2.0), -Vec3::Z));
+    }
+    for t in &g.indices {
+        let (a, b) = (g.positions[t[0] as usize], g.positions[t[1] as usize]);
+        rays.push(Ray::new((a + b) * 0.5 + Vec3::new(0.0, 0.0, 2.0), -Vec3::Z));
+    }
+    let hits = check_kernels(&scene, &rays, "grid vertices and edges");
+    assert_eq!(hits, rays.len(), "every ray straight down hits the grid");
+}
+
+#[test]
+fn invalid_rays_miss_in_every_kernel() {
+    let scene = scene_of(&[&uv_sphere(20, 20)], &[(Vec3::ZERO, 0.5)], &BuildOptions::default());
+    let good = Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z);
+    let bad = [
+        Ray { origin: Vec3::new(f32::NAN, 0.0, 5.0), ..good },
+        Ray { dir: Vec3::new(0.0, f32::INFINITY, -1.0), ..good },
+        Ray { dir: Vec3::ZERO, ..good },
+        Ray { tnear: 3.0, tfar: 2.0, ..good },
+        Ray { tnear: f32::NAN, ..good },
+        Ray { tfar: f32::NAN, ..good },
+        Ray { origin: Vec3::new(0.0, f32::NEG_INFINITY, 5.0), ..good },
+    ];
+    // Mix invalid rays into packets with valid ones, in every position.
+    let mut rays = Vec::new();
+    for i in 0..64 {
+        rays.push(if i % 3 == 1 { bad[i % bad.len()] } else { good });
+    }
+    for (i, r) in rays.iter().enumerate() {
+        assert_eq!(scene.intersect1(r).is_hit(), r.is_valid(), "ray {i}");
+        assert_eq!(scene.occluded1(r), r.is_valid(), "ray {i}");
+    }
+    check_kernels(&scene, &rays, "invalid mix");
+}
+
+#[test]
+fn bvh8_invariants_for_every_collapse() {
+    let soup = random_soup(5000, 0.05, 4);
+    let g = grid(30, 30);
+    let point = random_soup(50, 0.0, 5).map_positions(|_| Vec3::splat(0.25));
+    let spheres: Vec<(Vec3, f32)> = (0..40).map(|i| (Vec3::new(i as f32 * 0.05 - 1.0, 0.0, 0.0), 0.04)).collect();
+    for (what, scene) in [
+        ("soup", scene_of(&[&soup], &[], &BuildOptions::default())),
+        ("grid+spheres leaf 8", scene_of(&[&g], &spheres, &BuildOptions { max_leaf_size: 8, ..Default::default() })),
+        ("point", scene_of(&[&point], &[], &BuildOptions::default())),
+        ("single", scene_of(&[&random_soup(1, 0.5, 7)], &[], &BuildOptions::default())),
+        ("one sphere", scene_of(&[], &[(Vec3::ZERO, 1.0)], &BuildOptions::default())),
+        ("empty", scene_of(&[], &[], &BuildOptions::default())),
+    ] {
+        let bounds = prim_bounds(&scene);
+        for method in [CollapseMethod::Optimal, CollapseMethod::Greedy] {
+            let opts = CollapseOptions { method, ..CollapseOptions::default() };
+            let b4: Bvh8<Tri4> = collapse(scene.bvh2(), |id| scene.prim_shape(id), &opts);
+            let b8: Bvh8<Tri8> = collapse(scene.bvh2(), |id| scene.prim_shape(id), &opts);
+            validate_bvh8(&b4, &bounds).unwrap_or_else(|e| panic!("{what} {method:?} Tri4: {e}"));
+            validate_bvh8(&b8, &bounds).unwrap_or_else(|e| panic!("{what} {method:?} Tri8: {e}"));
+            // Both block widths and both collapses give the reference's hits.
+            for r in random_rays(&scene, 3000, 11) {
+                let want = scene.intersect1_reference(&r);
+                for got in [b4.intersect1(&r), b8.intersect1(&r)] {
+                    assert_eq!(got.t.to_bits(), want.t.to_bits(), "{what} {method:?}");
+                }
+                assert_eq!(b4.occluded1(&r), want.is_hit());
+                assert_eq!(b8.occluded1(&r), want.is_hit());
+            }
+            eprintln!("{what} {method:?}: Tri4 {}", b4.stats());
+        }
+    }
+    // Empty slots never hit: a ray through everything sees only used slots.
+    let scene = scene_of(&[&soup], &[], &BuildOptions::default());
+    let r1 = raypack::bvh::traverse1::Ray1::new(&Ray::new(Vec3::splat(-3.0), Vec3::ONE));
+    for n in &scene.bvh8().nodes {
+        let (mask, _) = r1.intersect_node(n, f32::INFINITY);
+        let used = (0..8).filter(|&i| !n.children[i].is_empty()).fold(0u32, |m, i| m | 1 << i);
+        assert_eq!(mask & !used, 0, "an empty slot was hit");
+    }
+}
+
+#[test]
+fn optimal_collapse_beats_greedy_sah() {
+    let soup = random_soup(20_000, 0.03, 8);
+    let scene = scene_of(&[&soup], &[], &BuildOptions::default());
+    let opt: Bvh8<Tri4> = collapse(scene.bvh2(), |id| scene.prim_shape(id), &CollapseOptions::default());
+    let greedy: Bvh8<Tri4> = collapse(
+        scene.bvh2(),
+        |id| scene.prim_shape(id),
+        &CollapseOptions { method: CollapseMethod::Greedy, ..Default::default() },
+    );
+    let (o, g) = (opt.stats(), greedy.stats());
+    eprintln!("optimal {o}\ngreedy  {g}");
+    assert!(o.sah_cost <= g.sah_cost, "optimal {} > greedy {}", o.sah_cost, g.sah_cost);
+    assert!(o.block_fill > g.block_fill);
+    let _ = Tri8::M;
+}
