@@ -305,7 +305,7 @@ impl<T: TriBlock, S: Fn(u32) -> PrimShape> Emitter<'_, T, S> {
                 }
                 self.out.tris.push(b);
             }
-            NodeRef::leaf(LeafKind::Triangles, first as u32, self.out.tris.len() - first)
+            NodeRef::leaf(LeafKind::Triangles, first as u32, self.out.tris.len() - first, (ids.len() - 1) % T::M + 1)
         } else {
             let first = self.out.spheres.len();
             for chunk in ids.chunks(Sphere4::M) {
@@ -316,7 +316,12 @@ impl<T: TriBlock, S: Fn(u32) -> PrimShape> Emitter<'_, T, S> {
                 }
                 self.out.spheres.push(b);
             }
-            NodeRef::leaf(LeafKind::Spheres, first as u32, self.out.spheres.len() - first)
+            NodeRef::leaf(
+                LeafKind::Spheres,
+                first as u32,
+                self.out.spheres.len() - first,
+                (ids.len() - 1) % Sphere4::M + 1,
+            )
         }
     }
 

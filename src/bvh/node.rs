@@ -35,8 +35,9 @@ pub enum LeafKind {
 /// Bit layout, from the most significant bit:
 /// * bit 63: leaf flag;
 /// * inner: bits 0..32 hold the node index into `Bvh8::nodes`;
-/// * leaf: bit 62 is set for sphere blocks, bits 32..48 hold the number of blocks
-///   (at least 1), bits 0..32 the index of the first block;
+/// * leaf: bit 62 is set for sphere blocks, bits 48..53 hold the number of used lanes of
+///   the last block (all earlier blocks are full), bits 32..48 the number of blocks (at
+///   least 1), bits 0..32 the index of the first block;
 /// * empty: all bits set ([`NodeRef::EMPTY`]); never dereferenced because the slot's box can
 ///   never be hit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -58,12 +59,14 @@ impl NodeRef {
         NodeRef(index as u64)
     }
 
-    /// A leaf of `count` blocks starting at block `first`.
+    /// A leaf of `count` blocks starting at block `first`, whose last block uses
+    /// `last_lanes` lanes (`1 ..= 16`).
     #[inline]
-    pub fn leaf(kind: LeafKind, first: u32, count: usize) -> Self {
+    pub fn leaf(kind: LeafKind, first: u32, count: usize, last_lanes: usize) -> Self {
         assert!((1..=Self::MAX_LEAF_BLOCKS).contains(&count), "leaf of {count} blocks");
+        assert!((1..=16).contains(&last_lanes), "{last_lanes} lanes");
         let kind = if kind == LeafKind::Spheres { SPHERE_BIT } else { 0 };
-        NodeRef(LEAF_BIT | kind | ((count as u64) << 32) | first as u64)
+        NodeRef(LEAF_BIT | kind | ((last_lanes as u64) << 48) | ((count as u64) << 32) | first as u64)
     }
 
     /// True for leaves (and for [`NodeRef::EMPTY`]).
@@ -94,6 +97,12 @@ impl NodeRef {
     #[inline(always)]
     pub fn block_count(self) -> usize {
         ((self.0 >> 32) & 0xFFFF) as usize
+    }
+
+    /// Used lanes of block `k` of a leaf (all lanes but in the last block).
+    #[inline(always)]
+    pub fn lanes_of_block(self, k: usize, m: usize) -> usize {
+        if k + 1 == self.block_count() { ((self.0 >> 48) & 0x1F) as usize } else { m }
     }
 
     /// What the blocks of a leaf hold.
@@ -188,10 +197,12 @@ mod tests {
 
     #[test]
     fn references_round_trip() {
-        let r = NodeRef::leaf(LeafKind::Spheres, 123_456, 7);
+        let r = NodeRef::leaf(LeafKind::Spheres, 123_456, 7, 3);
         assert!(r.is_leaf() && !r.is_empty());
         assert_eq!((r.kind(), r.first_block(), r.block_count()), (LeafKind::Spheres, 123_456, 7));
-        let r = NodeRef::leaf(LeafKind::Triangles, u32::MAX - 1, 1);
+        assert_eq!((r.lanes_of_block(0, 4), r.lanes_of_block(6, 4)), (4, 3));
+        let r = NodeRef::leaf(LeafKind::Triangles, u32::MAX - 1, 1, 16);
+        assert_eq!(r.lanes_of_block(0, 16), 16);
         assert_eq!((r.kind(), r.first_block(), r.block_count()), (LeafKind::Triangles, u32::MAX as usize - 1, 1));
         let n = NodeRef::inner(42);
         assert!(!n.is_leaf() && n.node_index() == 42);

@@ -51,17 +51,22 @@ impl Ray1 {
 
     /// Slab test against the eight child boxes of `n` over `(tnear, tfar]`: bit `i` of the mask
     /// is set when child `i` is hit, and lane `i` of the result is its entry distance.
+    ///
+    /// Tried and not kept: the fused form `t = plane * inv - org * inv` (one FMA per plane
+    /// instead of a subtraction and a multiplication, as Embree's non-robust kernel does);
+    /// see the numbers at [`SLAB_FMA_NOTE`].
     #[inline(always)]
     pub fn intersect_node(&self, n: &Bvh8Node, tfar: f32) -> (u32, F32x8) {
         let b = &n.bounds;
-        let tnx = (F32x8::load(&b[self.near[0]]) - self.org.x) * self.inv.x;
-        let tny = (F32x8::load(&b[self.near[1]]) - self.org.y) * self.inv.y;
-        let tnz = (F32x8::load(&b[self.near[2]]) - self.org.z) * self.inv.z;
-        let tfx = (F32x8::load(&b[self.near[0] ^ 1]) - self.org.x) * self.inv.x;
-        let tfy = (F32x8::load(&b[self.near[1] ^ 1]) - self.org.y) * self.inv.y;
-        let tfz = (F32x8::load(&b[self.near[2] ^ 1]) - self.org.z) * self.inv.z;
-        let tn = tnx.max(tny).max(tnz.max(self.tnear));
-        let tf = (tfx.min(tfy).min(tfz) * F32x8::splat(SLAB_WIDEN)).min(F32x8::splat(tfar));
+        let [nx, ny, nz] = self.near;
+        let tnx = (F32x8::load(&b[nx]) - self.org.x) * self.inv.x;
+        let tny = (F32x8::load(&b[ny]) - self.org.y) * self.inv.y;
+        let tnz = (F32x8::load(&b[nz]) - self.org.z) * self.inv.z;
+        let tfx = (F32x8::load(&b[nx ^ 1]) - self.org.x) * self.inv.x;
+        let tfy = (F32x8::load(&b[ny ^ 1]) - self.org.y) * self.inv.y;
+        let tfz = (F32x8::load(&b[nz ^ 1]) - self.org.z) * self.inv.z;
+        let tn = tnx.vmax(tny).vmax(tnz.vmax(self.tnear));
+        let tf = (tfx.vmin(tfy).vmin(tfz) * F32x8::splat(SLAB_WIDEN)).vmin(F32x8::splat(tfar));
         (tn.le(tf).bitmask(), tn)
     }
 
@@ -193,32 +198,87 @@ impl<T: TriBlock> Bvh8<T> {
     /// Closest-hit traversal of the subtree `start`, shrinking `tfar` and updating `hit` as
     /// closer hits are found (the single-ray fallback of the packet kernels enters here).
     #[inline]
-    pub fn intersect1_from(&self, r: &Ray1, start: NodeRef, tfar: &mut f32, hit: &mut Hit) {
-        let mut stack = Stack::<NodeRef>::new();
+    pub fn intersect1_from(&self, r: &Ray1, start: NodeRef, tfar_io: &mut f32, hit_io: &mut Hit) {
+        let mut refs = [MaybeUninit::<NodeRef>::uninit(); BVH8_STACK];
+        let mut dists = [MaybeUninit::<f32>::uninit(); BVH8_STACK];
+        let mut sp = 0usize;
         let org = Vec3x::<T::V>::splat(r.ray.origin);
         let dir = Vec3x::<T::V>::splat(r.ray.dir);
         let tnear = T::V::splat(r.ray.tnear);
+        let mut tfar = *tfar_io;
+        let mut hit = *hit_io;
         let mut cur = start;
         loop {
             'descend: {
                 while !cur.is_leaf() {
                     let node = &self.nodes[cur.node_index()];
-                    let (mask, dist) = r.intersect_node(node, *tfar);
+                    let (mut mask, dist) = r.intersect_node(node, tfar);
                     if mask == 0 {
                         break 'descend;
                     }
-                    cur = order_children(mask, dist, &mut stack, |i| node.children[i]);
+                    let d = dist.as_array();
+                    let i0 = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    if mask == 0 {
+                        cur = node.children[i0];
+                        continue;
+                    }
+                    let i1 = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    if mask == 0 {
+                        let (near, far) = if d[i0] <= d[i1] { (i0, i1) } else { (i1, i0) };
+                        refs[sp] = MaybeUninit::new(node.children[far]);
+                        dists[sp] = MaybeUninit::new(d[far]);
+                        sp += 1;
+                        cur = node.children[near];
+                        continue;
+                    }
+                    // Three or more: push all, sort the pushed run by decreasing distance
+                    // (insertion sort), continue with the nearest.
+                    let base = sp;
+                    for i in [i0, i1] {
+                        refs[sp] = MaybeUninit::new(node.children[i]);
+                        dists[sp] = MaybeUninit::new(d[i]);
+                        sp += 1;
+                    }
+                    while mask != 0 {
+                        let i = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        refs[sp] = MaybeUninit::new(node.children[i]);
+                        dists[sp] = MaybeUninit::new(d[i]);
+                        sp += 1;
+                    }
+                    for i in base + 1..sp {
+                        // SAFETY: entries base..sp were written just above.
+                        let (rr, dd) = unsafe { (refs[i].assume_init(), dists[i].assume_init()) };
+                        let mut j = i;
+                        // SAFETY: base <= j - 1 < sp, written above.
+                        while j > base && unsafe { dists[j - 1].assume_init() } < dd {
+                            refs[j] = refs[j - 1];
+                            dists[j] = dists[j - 1];
+                            j -= 1;
+                        }
+                        refs[j] = MaybeUninit::new(rr);
+                        dists[j] = MaybeUninit::new(dd);
+                    }
+                    sp -= 1;
+                    // SAFETY: entry sp was written above.
+                    cur = unsafe { refs[sp].assume_init() };
                 }
-                self.intersect_leaf(cur, r, &org, &dir, tnear, tfar, hit);
+                self.intersect_leaf(cur, r, &org, &dir, tnear, &mut tfar, &mut hit);
             }
             loop {
-                match stack.pop() {
-                    None => return,
-                    Some((next, d)) if d <= *tfar => {
-                        cur = next;
-                        break;
-                    }
-                    Some(_) => {}
+                if sp == 0 {
+                    *tfar_io = tfar;
+                    *hit_io = hit;
+                    return;
+                }
+                sp -= 1;
+                // SAFETY: entries below sp were written by pushes.
+                let (next, d) = unsafe { (refs[sp].assume_init(), dists[sp].assume_init()) };
+                if d <= tfar {
+                    cur = next;
+                    break;
                 }
             }
         }

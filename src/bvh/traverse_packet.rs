@@ -27,7 +27,6 @@ use crate::bvh::{BVH8_STACK, Bvh8};
 use crate::geometry::TriBlock;
 use crate::geometry::sphere_block::sphere_lanes;
 use crate::geometry::tri_block::moller_trumbore;
-use crate::math::Vec3;
 use crate::ray::{Hit, Ray};
 use crate::simd::{F32x8, Lanes, Vec3x};
 use std::mem::MaybeUninit;
@@ -65,70 +64,52 @@ impl<V: Lanes> PacketRays<V> {
     /// invalid rays, are inactive.
     #[inline(always)]
     pub fn new(rays: &[Ray], mask: u32) -> Self {
-        let k = V::LANES;
-        let mut buf = [[0.0f32; 16]; 9];
-        let mut act = [0.0f32; 16];
-        for i in 0..k {
-            let r = &rays[i];
-            let on = mask >> i & 1 != 0 && r.is_valid();
-            let inv = r.inv_dir();
-            let vals = [r.origin.x, r.origin.y, r.origin.z, r.dir.x, r.dir.y, r.dir.z, inv.x, inv.y, inv.z];
-            for (row, x) in buf.iter_mut().zip(vals) {
+        let mut rows = [[0.0f32; 16]; 8];
+        for (i, r) in rays.iter().take(V::LANES).enumerate() {
+            let vals = [r.origin.x, r.origin.y, r.origin.z, r.dir.x, r.dir.y, r.dir.z, r.tnear, r.tfar];
+            for (row, x) in rows.iter_mut().zip(vals) {
                 row[i] = x;
             }
-            act[i] = if on { f32::from_bits(u32::MAX) } else { 0.0 };
         }
-        let mut tn = [0.0f32; 16];
-        let mut tf = [0.0f32; 16];
-        for i in 0..k {
-            tn[i] = rays[i].tnear;
-            tf[i] = rays[i].tfar;
-        }
-        let row = |r: &[f32; 16]| V::load(r);
-        Self {
-            org: Vec3x { x: row(&buf[0]), y: row(&buf[1]), z: row(&buf[2]) },
-            dir: Vec3x { x: row(&buf[3]), y: row(&buf[4]), z: row(&buf[5]) },
-            inv: Vec3x { x: row(&buf[6]), y: row(&buf[7]), z: row(&buf[8]) },
-            tnear: V::load(&tn),
-            tfar: V::load(&tf),
-            u: V::splat(0.0),
-            v: V::splat(0.0),
-            prim: none_bits(),
-            active: V::load(&act),
-        }
+        let valid = if rays.len() >= V::LANES { mask } else { mask & ((1u32 << rays.len()) - 1) };
+        let [ox, oy, oz, dx, dy, dz, tn, tf] = &rows;
+        Self::from_rows([ox, oy, oz], [dx, dy, dz], tn, tf, valid)
     }
 
-    /// Lane form of the rows of a `RayPacket8` / `RayPacket16`.
-    #[allow(clippy::too_many_arguments)]
+    /// Lane form of the rows of a `RayPacket8` / `RayPacket16` (each row at least K long);
+    /// lanes whose bit is clear in `mask`, and invalid rays ([`Ray::is_valid`], evaluated
+    /// lane-wise), are inactive.
     #[inline(always)]
     pub fn from_rows(org: [&[f32]; 3], dir: [&[f32]; 3], tnear: &[f32], tfar: &[f32], mask: u32) -> Self {
-        let k = V::LANES;
-        let mut act = [0.0f32; 16];
-        let mut inv = [[0.0f32; 16]; 3];
-        for i in 0..k {
-            let r = Ray {
-                origin: Vec3::new(org[0][i], org[1][i], org[2][i]),
-                dir: Vec3::new(dir[0][i], dir[1][i], dir[2][i]),
-                tnear: tnear[i],
-                tfar: tfar[i],
-            };
-            let on = mask >> i & 1 != 0 && r.is_valid();
-            act[i] = if on { f32::from_bits(u32::MAX) } else { 0.0 };
-            let iv = r.inv_dir();
-            inv[0][i] = iv.x;
-            inv[1][i] = iv.y;
-            inv[2][i] = iv.z;
+        let org = Vec3x { x: V::load(org[0]), y: V::load(org[1]), z: V::load(org[2]) };
+        let dir = Vec3x { x: V::load(dir[0]), y: V::load(dir[1]), z: V::load(dir[2]) };
+        let (tnear, tfar) = (V::load(tnear), V::load(tfar));
+        let zero = V::splat(0.0);
+        let finite = org.x.is_finite() & org.y.is_finite() & org.z.is_finite();
+        let finite = finite & dir.x.is_finite() & dir.y.is_finite() & dir.z.is_finite();
+        let nonzero = !(dir.x.eq(zero) & dir.y.eq(zero) & dir.z.eq(zero));
+        let interval = tnear.ge(zero) & tnear.le(tfar);
+        let mut bits = [0.0f32; 16];
+        for (i, b) in bits.iter_mut().enumerate().take(V::LANES) {
+            *b = f32::from_bits(if mask >> i & 1 != 0 { u32::MAX } else { 0 });
         }
+        let active = V::load(&bits) & finite & nonzero & interval;
+        // `safe_recip` lane-wise: tiny components map to a huge value of the same sign.
+        let recip = |x: V| {
+            let tiny = V::splat(1e-18);
+            let abs = x & !V::splat(-0.0);
+            abs.lt(tiny).select(V::splat(1.0 / 1e-18f32).copysign(x), V::splat(1.0) / x)
+        };
         Self {
-            org: Vec3x { x: V::load(org[0]), y: V::load(org[1]), z: V::load(org[2]) },
-            dir: Vec3x { x: V::load(dir[0]), y: V::load(dir[1]), z: V::load(dir[2]) },
-            inv: Vec3x { x: V::load(&inv[0]), y: V::load(&inv[1]), z: V::load(&inv[2]) },
-            tnear: V::load(tnear),
-            tfar: V::load(tfar),
-            u: V::splat(0.0),
-            v: V::splat(0.0),
+            org,
+            dir,
+            inv: Vec3x { x: recip(dir.x), y: recip(dir.y), z: recip(dir.z) },
+            tnear,
+            tfar,
+            u: zero,
+            v: zero,
             prim: none_bits(),
-            active: V::load(&act),
+            active,
         }
     }
 
@@ -185,8 +166,8 @@ impl<V: Lanes> PacketRays<V> {
         let t1y = (V::splat(b[3][i]) - self.org.y) * self.inv.y;
         let t0z = (V::splat(b[4][i]) - self.org.z) * self.inv.z;
         let t1z = (V::splat(b[5][i]) - self.org.z) * self.inv.z;
-        let tn = t0x.min(t1x).max(t0y.min(t1y)).max(t0z.min(t1z).max(self.tnear));
-        let tf = (t0x.max(t1x).min(t0y.max(t1y)).min(t0z.max(t1z)) * V::splat(SLAB_WIDEN)).min(self.tfar);
+        let tn = t0x.vmin(t1x).vmax(t0y.vmin(t1y)).vmax(t0z.vmin(t1z).vmax(self.tnear));
+        let tf = (t0x.vmax(t1x).vmin(t0y.vmax(t1y)).vmin(t0z.vmax(t1z)) * V::splat(SLAB_WIDEN)).vmin(self.tfar);
         (tn.le(tf), tn)
     }
 
@@ -196,12 +177,9 @@ impl<V: Lanes> PacketRays<V> {
         let range = leaf.first_block()..leaf.first_block() + leaf.block_count();
         match leaf.kind() {
             LeafKind::Triangles => {
-                for block in &bvh.tris[range] {
-                    for lane in 0..T::M {
+                for (k, block) in bvh.tris[range].iter().enumerate() {
+                    for lane in 0..leaf.lanes_of_block(k, T::M) {
                         let prim = block.prim(lane);
-                        if prim == u32::MAX {
-                            break;
-                        }
                         let [v0, e1, e2] = block.lane_edges(lane);
                         let (m, t, u, v) = moller_trumbore(
                             &self.org,
@@ -223,12 +201,9 @@ impl<V: Lanes> PacketRays<V> {
                 }
             }
             LeafKind::Spheres => {
-                for block in &bvh.spheres[range] {
-                    for lane in 0..4 {
+                for (k, block) in bvh.spheres[range].iter().enumerate() {
+                    for lane in 0..leaf.lanes_of_block(k, 4) {
                         let prim = block.prim[lane];
-                        if prim == u32::MAX {
-                            break;
-                        }
                         let c = Vec3x::splat(block.center(lane));
                         let (m, t) =
                             sphere_lanes(&self.org, &self.dir, self.tnear, self.tfar, &c, V::splat(block.radius[lane]));
@@ -252,11 +227,8 @@ impl<V: Lanes> PacketRays<V> {
         let range = leaf.first_block()..leaf.first_block() + leaf.block_count();
         match leaf.kind() {
             LeafKind::Triangles => {
-                for block in &bvh.tris[range] {
-                    for lane in 0..T::M {
-                        if block.prim(lane) == u32::MAX {
-                            break;
-                        }
+                for (k, block) in bvh.tris[range].iter().enumerate() {
+                    for lane in 0..leaf.lanes_of_block(k, T::M) {
                         let [v0, e1, e2] = block.lane_edges(lane);
                         let (m, ..) = moller_trumbore(
                             &self.org,
@@ -275,11 +247,8 @@ impl<V: Lanes> PacketRays<V> {
                 }
             }
             LeafKind::Spheres => {
-                for block in &bvh.spheres[range] {
-                    for lane in 0..4 {
-                        if block.prim[lane] == u32::MAX {
-                            break;
-                        }
+                for (k, block) in bvh.spheres[range].iter().enumerate() {
+                    for lane in 0..leaf.lanes_of_block(k, 4) {
                         let c = Vec3x::splat(block.center(lane));
                         let (m, _) =
                             sphere_lanes(&self.org, &self.dir, self.tnear, self.tfar, &c, V::splat(block.radius[lane]));
@@ -475,27 +444,29 @@ impl Frustum {
     /// [`Ray1::intersect_node`] in floating point too. A negative bound is not tight, but the
     /// interval starts at `tnear >= 0`, which makes it harmless.
     pub fn new<V: Lanes>(packets: &[PacketRays<V>]) -> Option<Self> {
-        let mut lo = [f32::INFINITY; 9];
-        let mut hi = [f32::NEG_INFINITY; 9];
-        let (mut tn, mut tf) = (f32::INFINITY, f32::NEG_INFINITY);
+        let (pinf, ninf) = (V::splat(f32::INFINITY), V::splat(f32::NEG_INFINITY));
+        let mut lo = [pinf; 7];
+        let mut hi = [ninf; 7];
+        let mut any = false;
         for p in packets {
-            let m = p.active.bitmask();
-            if m == 0 {
+            if p.active.bitmask() == 0 {
                 continue;
             }
+            any = true;
             let rows = [p.org.x, p.org.y, p.org.z, p.inv.x, p.inv.y, p.inv.z];
             for (k, row) in rows.iter().enumerate() {
-                let on = p.active.select(*row, V::splat(f32::INFINITY));
-                lo[k] = lo[k].min(on.reduce_min());
-                let on = p.active.select(*row, V::splat(f32::NEG_INFINITY));
-                hi[k] = hi[k].max(on.reduce_max());
+                lo[k] = lo[k].vmin(p.active.select(*row, pinf));
+                hi[k] = hi[k].vmax(p.active.select(*row, ninf));
             }
-            tn = tn.min(p.active.select(p.tnear, V::splat(f32::INFINITY)).reduce_min());
-            tf = tf.max(p.active.select(p.tfar, V::splat(f32::NEG_INFINITY)).reduce_max());
+            lo[6] = lo[6].vmin(p.active.select(p.tnear, pinf));
+            hi[6] = hi[6].vmax(p.active.select(p.tfar, ninf));
         }
-        if tn == f32::INFINITY {
+        if !any {
             return None;
         }
+        let lo: [f32; 7] = std::array::from_fn(|k| lo[k].reduce_min());
+        let hi: [f32; 7] = std::array::from_fn(|k| hi[k].reduce_max());
+        let (tn, tf) = (lo[6], hi[6]);
         let mut near = [0; 3];
         let mut near_org = [0.0; 3];
         let mut far_org = [0.0; 3];
@@ -539,8 +510,8 @@ impl Frustum {
         let tfx = (F32x8::load(&b[self.near[0] ^ 1]) - self.far_org.x) * self.far_rdir.x;
         let tfy = (F32x8::load(&b[self.near[1] ^ 1]) - self.far_org.y) * self.far_rdir.y;
         let tfz = (F32x8::load(&b[self.near[2] ^ 1]) - self.far_org.z) * self.far_rdir.z;
-        let tn = tnx.max(tny).max(tnz.max(self.tnear));
-        let tf = (tfx.min(tfy).min(tfz) * F32x8::splat(SLAB_WIDEN)).min(F32x8::splat(self.tfar));
+        let tn = tnx.vmax(tny).vmax(tnz.vmax(self.tnear));
+        let tf = (tfx.vmin(tfy).vmin(tfz) * F32x8::splat(SLAB_WIDEN)).vmin(F32x8::splat(self.tfar));
         (tn.le(tf).bitmask(), tn)
     }
 }
@@ -583,19 +554,21 @@ pub fn intersect_frustum<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, packets: &mut [Pa
                 });
             }
             let parent = &bvh.nodes[cur.parent as usize];
-            let mut new_far = f32::NEG_INFINITY;
+            let mut tested = false;
             for p in packets.iter_mut() {
-                if p.active.bitmask() == 0 {
-                    continue;
-                }
                 let (m, _) = p.intersect_box(parent, cur.slot as usize);
                 let m = m & p.active;
                 if m.bitmask() != 0 {
                     p.intersect_leaf(bvh, cur.node, m);
+                    tested = true;
                 }
-                new_far = new_far.max(p.active.select(p.tfar, V::splat(f32::NEG_INFINITY)).reduce_max());
             }
-            fr.tfar = new_far;
+            if tested {
+                // The farthest interval end of the tile shrinks as rays find hits.
+                let ninf = V::splat(f32::NEG_INFINITY);
+                let far = packets.iter().fold(ninf, |acc, p| acc.vmax(p.active.select(p.tfar, ninf)));
+                fr.tfar = far.reduce_max();
+            }
         }
         loop {
             match stack.pop() {
