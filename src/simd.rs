@@ -84,8 +84,10 @@ macro_rules! impl_lanes {
             }
             #[inline(always)]
             fn load(s: &[f32]) -> Self {
-                let a: [f32; $n] = s[..$n].try_into().expect("slice of LANES floats");
-                <$t>::new(a)
+                assert!(s.len() >= $n, "slice of at least LANES floats");
+                // SAFETY: `s` holds at least LANES floats (checked above; the check folds away
+                // for fixed-size rows); the read is unaligned and `$t` is plain old data.
+                unsafe { (s.as_ptr() as *const $t).read_unaligned() }
             }
             #[inline(always)]
             fn store(self, s: &mut [f32]) {

@@ -11,10 +11,12 @@ pub mod build_sah;
 pub mod bvh2;
 pub mod bvh8;
 pub mod collapse;
+pub mod counters;
 pub mod node;
 pub mod stats;
 pub mod traverse1;
 pub mod traverse_packet;
+pub mod tune;
 pub mod validate;
 
 pub use build_sah::{BuildOptions, BuildPrim, BuildQuality, SplitMethod, build_bvh2};

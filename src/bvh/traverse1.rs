@@ -15,6 +15,7 @@
 //! ([`crate::geometry::tri_block`]).
 
 use crate::bvh::bvh2::SLAB_WIDEN;
+use crate::bvh::counters::*;
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
 use crate::bvh::{BVH8_STACK, Bvh8};
 use crate::geometry::TriBlock;
@@ -102,7 +103,11 @@ pub(crate) struct Stack<E: Copy = NodeRef> {
 impl<E: Copy> Stack<E> {
     #[inline(always)]
     pub(crate) fn new() -> Self {
-        Self { refs: [MaybeUninit::uninit(); BVH8_STACK], dist: [MaybeUninit::uninit(); BVH8_STACK], len: 0 }
+        Self {
+            refs: [const { MaybeUninit::uninit() }; BVH8_STACK],
+            dist: [const { MaybeUninit::uninit() }; BVH8_STACK],
+            len: 0,
+        }
     }
 
     #[inline(always)]
@@ -199,8 +204,8 @@ impl<T: TriBlock> Bvh8<T> {
     /// closer hits are found (the single-ray fallback of the packet kernels enters here).
     #[inline]
     pub fn intersect1_from(&self, r: &Ray1, start: NodeRef, tfar_io: &mut f32, hit_io: &mut Hit) {
-        let mut refs = [MaybeUninit::<NodeRef>::uninit(); BVH8_STACK];
-        let mut dists = [MaybeUninit::<f32>::uninit(); BVH8_STACK];
+        let mut refs = [const { MaybeUninit::<NodeRef>::uninit() }; BVH8_STACK];
+        let mut dists = [const { MaybeUninit::<f32>::uninit() }; BVH8_STACK];
         let mut sp = 0usize;
         let org = Vec3x::<T::V>::splat(r.ray.origin);
         let dir = Vec3x::<T::V>::splat(r.ray.dir);
@@ -212,6 +217,7 @@ impl<T: TriBlock> Bvh8<T> {
             'descend: {
                 while !cur.is_leaf() {
                     let node = &self.nodes[cur.node_index()];
+                    count!(NODES, 1);
                     let (mut mask, dist) = r.intersect_node(node, tfar);
                     if mask == 0 {
                         break 'descend;
@@ -222,6 +228,15 @@ impl<T: TriBlock> Bvh8<T> {
                     if mask == 0 {
                         cur = node.children[i0];
                         continue;
+                    }
+                    if crate::bvh::tune::knob(crate::bvh::tune::NO_PREFETCH) == 0 {
+                        let mut m = mask;
+                        while m != 0 {
+                            let i = m.trailing_zeros() as usize;
+                            m &= m - 1;
+                            self.prefetch(node.children[i]);
+                        }
+                        self.prefetch(node.children[i0]);
                     }
                     let i1 = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
@@ -297,6 +312,8 @@ impl<T: TriBlock> Bvh8<T> {
         hit: &mut Hit,
     ) {
         let range = leaf.first_block()..leaf.first_block() + leaf.block_count();
+        count!(LEAVES, 1);
+        count!(BLOCKS, leaf.block_count());
         match leaf.kind() {
             LeafKind::Triangles => {
                 for block in &self.tris[range] {
@@ -337,10 +354,12 @@ impl<T: TriBlock> Bvh8<T> {
         ray.is_valid() && self.occluded1_from(&Ray1::new(ray), self.root())
     }
 
-    /// Any-hit traversal of the subtree `start`.
+    /// Any-hit traversal of the subtree `start`. Children are visited in slot order (no
+    /// sorting): an occluder anywhere ends the query, so ordering buys little.
     #[inline]
     pub fn occluded1_from(&self, r: &Ray1, start: NodeRef) -> bool {
-        let mut stack = Stack::<NodeRef>::new();
+        let mut stack = [const { MaybeUninit::<NodeRef>::uninit() }; BVH8_STACK];
+        let mut sp = 0usize;
         let org = Vec3x::<T::V>::splat(r.ray.origin);
         let dir = Vec3x::<T::V>::splat(r.ray.dir);
         let (tnear, tfar) = (T::V::splat(r.ray.tnear), T::V::splat(r.ray.tfar));
@@ -356,9 +375,10 @@ impl<T: TriBlock> Bvh8<T> {
                     let first = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
                     while mask != 0 {
-                        let i = 31 - mask.leading_zeros() as usize;
-                        mask &= !(1 << i);
-                        stack.push(node.children[i], 0.0);
+                        let i = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        stack[sp] = MaybeUninit::new(node.children[i]);
+                        sp += 1;
                     }
                     cur = node.children[first];
                 }
@@ -380,10 +400,12 @@ impl<T: TriBlock> Bvh8<T> {
                     }
                 }
             }
-            match stack.pop() {
-                None => return false,
-                Some((next, _)) => cur = next,
+            if sp == 0 {
+                return false;
             }
+            sp -= 1;
+            // SAFETY: entries below sp were written by pushes.
+            cur = unsafe { stack[sp].assume_init() };
         }
     }
 }

@@ -21,6 +21,7 @@
 //! conservative and the triangle test is the same bit-exact Möller–Trumbore.
 
 use crate::bvh::bvh2::SLAB_WIDEN;
+use crate::bvh::counters::*;
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
 use crate::bvh::traverse1::{Ray1, Stack, order_children};
 use crate::bvh::{BVH8_STACK, Bvh8};
@@ -171,14 +172,61 @@ impl<V: Lanes> PacketRays<V> {
         (tn.le(tf), tn)
     }
 
+    /// The rays of the lanes in `bits`, one at a time, against all triangles of `block`.
+    #[inline(always)]
+    fn intersect_block_per_ray<B: TriBlock>(&mut self, block: &B, bits: u32) {
+        let mut rows = [[0.0f32; 16]; 8];
+        for (row, x) in rows
+            .iter_mut()
+            .zip([self.org.x, self.org.y, self.org.z, self.dir.x, self.dir.y, self.dir.z, self.tnear, self.tfar])
+        {
+            x.store(row);
+        }
+        let mut hit = false;
+        let (mut uu, mut vv, mut pp) = ([0.0f32; 16], [0.0f32; 16], [0.0f32; 16]);
+        for i in crate::simd::bits(bits) {
+            let o = Vec3x { x: B::V::splat(rows[0][i]), y: B::V::splat(rows[1][i]), z: B::V::splat(rows[2][i]) };
+            let d = Vec3x { x: B::V::splat(rows[3][i]), y: B::V::splat(rows[4][i]), z: B::V::splat(rows[5][i]) };
+            let h = block.intersect1(&o, &d, B::V::splat(rows[6][i]), B::V::splat(rows[7][i]));
+            if let Some(l) = h.closest() {
+                if !hit {
+                    hit = true;
+                    self.u.store(&mut uu);
+                    self.v.store(&mut vv);
+                    self.prim.store(&mut pp);
+                }
+                rows[7][i] = h.t.lane(l);
+                uu[i] = h.u.lane(l);
+                vv[i] = h.v.lane(l);
+                pp[i] = f32::from_bits(block.prim(l));
+            }
+        }
+        if hit {
+            self.tfar = V::load(&rows[7]);
+            self.u = V::load(&uu);
+            self.v = V::load(&vv);
+            self.prim = V::load(&pp);
+        }
+    }
+
     /// Tests the `active` lanes against the primitives of `leaf`, keeping the closest hits.
     #[inline(always)]
     fn intersect_leaf<T: TriBlock>(&mut self, bvh: &Bvh8<T>, leaf: NodeRef, active: V) {
         let range = leaf.first_block()..leaf.first_block() + leaf.block_count();
         match leaf.kind() {
             LeafKind::Triangles => {
+                let bits = active.bitmask();
+                let n_active = bits.count_ones() as usize;
                 for (k, block) in bvh.tris[range].iter().enumerate() {
-                    for lane in 0..leaf.lanes_of_block(k, T::M) {
+                    let lanes = leaf.lanes_of_block(k, T::M);
+                    if n_active < (crate::bvh::tune::knob(crate::bvh::tune::PER_RAY_LEAF) as usize).min(lanes) {
+                        count!(PER_RAY_BLOCKS, n_active);
+                        // Fewer rays than triangles: each ray against the whole block at once.
+                        self.intersect_block_per_ray(block, bits);
+                        continue;
+                    }
+                    count!(PACKET_TRI_TESTS, lanes);
+                    for lane in 0..lanes {
                         let prim = block.prim(lane);
                         let [v0, e1, e2] = block.lane_edges(lane);
                         let (m, t, u, v) = moller_trumbore(
@@ -271,7 +319,11 @@ struct PacketStack<V> {
 impl<V: Lanes> PacketStack<V> {
     #[inline(always)]
     fn new() -> Self {
-        Self { refs: [MaybeUninit::uninit(); BVH8_STACK], dist: [MaybeUninit::uninit(); BVH8_STACK], len: 0 }
+        Self {
+            refs: [const { MaybeUninit::uninit() }; BVH8_STACK],
+            dist: [const { MaybeUninit::uninit() }; BVH8_STACK],
+            len: 0,
+        }
     }
     #[inline(always)]
     fn push(&mut self, r: NodeRef, d: V) {
@@ -543,9 +595,15 @@ pub fn intersect_frustum<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, packets: &mut [Pa
             while !cur.node.is_leaf() {
                 let idx = cur.node.node_index();
                 let node = &bvh.nodes[idx];
+                count!(FRUSTUM_NODES, 1);
                 let (mask, dist) = fr.intersect_node(node);
                 if mask == 0 {
                     break 'descend;
+                }
+                if mask & (mask - 1) != 0 && crate::bvh::tune::knob(crate::bvh::tune::NO_PREFETCH) == 0 {
+                    for i in crate::simd::bits(mask) {
+                        bvh.prefetch(node.children[i]);
+                    }
                 }
                 cur = order_children(mask, dist, &mut stack, |i| TileEntry {
                     node: node.children[i],
@@ -558,7 +616,9 @@ pub fn intersect_frustum<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, packets: &mut [Pa
             for p in packets.iter_mut() {
                 let (m, _) = p.intersect_box(parent, cur.slot as usize);
                 let m = m & p.active;
+                count!(PACKET_LEAVES, 1);
                 if m.bitmask() != 0 {
+                    count!(PACKET_LEAF_LANES, m.bitmask().count_ones());
                     p.intersect_leaf(bvh, cur.node, m);
                     tested = true;
                 }

@@ -1,7 +1,7 @@
 //! Ray queries on a committed [`Scene`] beyond single rays: 8- and 16-ray packets, tiles of
 //! coherent rays, and streams that pick a kernel per batch and run over rayon.
 
-use crate::bvh::traverse_packet::{Frustum, PacketRays, intersect_frustum, intersect_hybrid, occluded_frustum};
+use crate::bvh::traverse_packet::{PacketRays, intersect_frustum, occluded_frustum};
 use crate::ray::{Hit, Ray, RayPacket8, RayPacket16};
 use crate::scene::Scene;
 use crate::simd::{F32x8, F32x16};
@@ -39,12 +39,8 @@ macro_rules! packet_queries {
                 valid as u32,
             );
             if rays.active_mask() != 0 {
-                let bvh = &self.bvh8;
-                if Frustum::new(std::slice::from_ref(&rays)).is_some() {
-                    intersect_frustum(bvh, std::slice::from_mut(&mut rays), HYBRID_THRESHOLD);
-                } else {
-                    intersect_hybrid(bvh, &mut rays, HYBRID_THRESHOLD);
-                }
+                // The frustum kernel falls back to the hybrid one when direction signs differ.
+                intersect_frustum(&self.bvh8, std::slice::from_mut(&mut rays), HYBRID_THRESHOLD);
             }
             for i in crate::simd::bits(valid as u32) {
                 let mut h = rays.hit(i);
