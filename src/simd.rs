@@ -57,6 +57,8 @@ pub trait Lanes:
     fn select(self, t: Self, f: Self) -> Self;
     /// Bit `i` set when lane `i` of the mask is true.
     fn bitmask(self) -> u32;
+    /// The mask whose lane `i` is true when bit `i` of `bits` is set.
+    fn from_bitmask(bits: u32) -> Self;
     /// `min` with `minps` semantics (`self < o ? self : o`; no NaN handling). Named apart
     /// from `wide`'s inherent `min`, which handles NaN at the cost of three instructions.
     fn vmin(self, o: Self) -> Self;
@@ -124,6 +126,14 @@ macro_rules! impl_lanes {
             #[inline(always)]
             fn bitmask(self) -> u32 {
                 self.to_bitmask()
+            }
+            #[inline(always)]
+            fn from_bitmask(bits: u32) -> Self {
+                let mut a = [0.0f32; $n];
+                for (i, x) in a.iter_mut().enumerate() {
+                    *x = f32::from_bits(((bits >> i) & 1).wrapping_neg());
+                }
+                <$t>::new(a)
             }
             #[inline(always)]
             fn vmin(self, o: Self) -> Self {
@@ -248,6 +258,8 @@ mod tests {
         assert_eq!(Lanes::le(a, b).bitmask(), 0b0111_0101);
         assert_eq!(Lanes::ge(a, b).bitmask(), 0b1110_0010, "NaN compares false");
         assert_eq!(F32x16::splat(1.0).lt(F32x16::splat(2.0)).bitmask(), 0xFFFF);
+        assert_eq!(F32x16::from_bitmask(0xA5C3).bitmask(), 0xA5C3);
+        assert_eq!(F32x8::from_bitmask(0x1FF).bitmask(), 0xFF);
         let m = Lanes::gt(a, b);
         assert_eq!(Lanes::select(m, a, b).lane(1), 5.0);
         assert_eq!(Lanes::select(m, a, b).lane(0), 3.0);

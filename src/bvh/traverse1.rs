@@ -92,101 +92,6 @@ impl Ray1 {
     }
 }
 
-/// A fixed-capacity traversal stack of entries (node references, or references with
-/// extra data) with their entry distances.
-pub(crate) struct Stack<E: Copy = NodeRef> {
-    refs: [MaybeUninit<E>; BVH8_STACK],
-    dist: [MaybeUninit<f32>; BVH8_STACK],
-    len: usize,
-}
-
-impl<E: Copy> Stack<E> {
-    #[inline(always)]
-    pub(crate) fn new() -> Self {
-        Self {
-            refs: [const { MaybeUninit::uninit() }; BVH8_STACK],
-            dist: [const { MaybeUninit::uninit() }; BVH8_STACK],
-            len: 0,
-        }
-    }
-
-    #[inline(always)]
-    pub(crate) fn push(&mut self, r: E, d: f32) {
-        // Each level pushes at most 7 entries and the depth is bounded by MAX_DEPTH, so the
-        // capacity BVH8_STACK cannot be exceeded; the index check stays as a safety net.
-        self.refs[self.len] = MaybeUninit::new(r);
-        self.dist[self.len] = MaybeUninit::new(d);
-        self.len += 1;
-    }
-
-    #[inline(always)]
-    pub(crate) fn pop(&mut self) -> Option<(E, f32)> {
-        if self.len == 0 {
-            return None;
-        }
-        self.len -= 1;
-        // SAFETY: entries below `len` were all written by `push`.
-        unsafe { Some((self.refs[self.len].assume_init(), self.dist[self.len].assume_init())) }
-    }
-
-    /// Sorts the entries from `from` to the top by decreasing distance, so the nearest is
-    /// popped first (insertion sort: at most 8 entries).
-    #[inline(always)]
-    pub(crate) fn sort_top(&mut self, from: usize) {
-        for i in from + 1..self.len {
-            // SAFETY: entries below `len` were all written by `push`.
-            let (r, d) = unsafe { (self.refs[i].assume_init(), self.dist[i].assume_init()) };
-            let mut j = i;
-            // SAFETY: as above; from <= j - 1 < len.
-            while j > from && unsafe { self.dist[j - 1].assume_init() } < d {
-                self.refs[j] = self.refs[j - 1];
-                self.dist[j] = self.dist[j - 1];
-                j -= 1;
-            }
-            self.refs[j] = MaybeUninit::new(r);
-            self.dist[j] = MaybeUninit::new(d);
-        }
-    }
-}
-
-/// Pushes the hit children of `node` (mask `mask`, entry distances `dist`) as `entry(slot)`
-/// and returns the nearest one to descend into, the rest on `stack` nearest on top.
-#[inline(always)]
-pub(crate) fn order_children<E: Copy>(
-    mut mask: u32,
-    dist: F32x8,
-    stack: &mut Stack<E>,
-    entry: impl Fn(usize) -> E,
-) -> E {
-    let i0 = mask.trailing_zeros() as usize;
-    mask &= mask - 1;
-    if mask == 0 {
-        return entry(i0);
-    }
-    let i1 = mask.trailing_zeros() as usize;
-    mask &= mask - 1;
-    let d = dist.as_array();
-    if mask == 0 {
-        return if d[i0] <= d[i1] {
-            stack.push(entry(i1), d[i1]);
-            entry(i0)
-        } else {
-            stack.push(entry(i0), d[i0]);
-            entry(i1)
-        };
-    }
-    let base = stack.len;
-    stack.push(entry(i0), d[i0]);
-    stack.push(entry(i1), d[i1]);
-    while mask != 0 {
-        let i = mask.trailing_zeros() as usize;
-        mask &= mask - 1;
-        stack.push(entry(i), d[i]);
-    }
-    stack.sort_top(base);
-    stack.pop().expect("just pushed").0
-}
-
 impl<T: TriBlock> Bvh8<T> {
     /// Closest hit along `ray` (invalid rays miss). Sphere hits carry `u = v = 0`; the scene
     /// fills in their surface coordinates.
@@ -368,6 +273,7 @@ impl<T: TriBlock> Bvh8<T> {
             'descend: {
                 while !cur.is_leaf() {
                     let node = &self.nodes[cur.node_index()];
+                    count!(NODES, 1);
                     let (mut mask, _) = r.intersect_node(node, r.ray.tfar);
                     if mask == 0 {
                         break 'descend;
@@ -383,9 +289,11 @@ impl<T: TriBlock> Bvh8<T> {
                     cur = node.children[first];
                 }
                 let range = cur.first_block()..cur.first_block() + cur.block_count();
+                count!(LEAVES, 1);
                 match cur.kind() {
                     LeafKind::Triangles => {
                         for block in &self.tris[range] {
+                            count!(BLOCKS, 1);
                             if block.intersect1(&org, &dir, tnear, tfar).mask != 0 {
                                 return true;
                             }

@@ -14,6 +14,16 @@ pub const PER_RAY_LEAF: usize = 0;
 /// Prefetch hit children: 0 = on, 1 = off.
 pub const NO_PREFETCH: usize = 1;
 
+/// Packet occlusion kernel: 0 = frustum, 1 = hybrid.
+pub const OCC_MODE: usize = 2;
+/// Hybrid switch threshold override (0 = default).
+pub const THRESHOLD: usize = 3;
+/// Packet intersect kernel: 0 = frustum, 1 = hybrid.
+pub const ISECT_MODE: usize = 4;
+
+/// Occlusion packets: 1 = no frustum prefilter of children.
+pub const NO_FRUSTUM_PREFILTER: usize = 5;
+
 #[inline(always)]
 pub fn knob(i: usize) -> u32 {
     KNOBS[i].load(Ordering::Relaxed)
