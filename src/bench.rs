@@ -9,7 +9,6 @@
 //! The raypack side is the table [`RAYPACK_KERNELS`]: adding a kernel there adds it to the
 //! benchmark, to the criterion bench and to the Embree cross-check test.
 
-use crate::bvh::Bvh2Node;
 use crate::ray::{Hit, Ray};
 use crate::raysets::{self, Checksum};
 use crate::scene::Scene;
@@ -66,20 +65,67 @@ fn scene_occluded1(scene: &Scene, rays: &[Ray], out: &mut [bool]) {
     }
 }
 
+macro_rules! packet_kernels {
+    ($intersect:ident, $occluded:ident, $packet:ty, $k:expr) => {
+        pub(super) fn $intersect(scene: &Scene, rays: &[Ray], hits: &mut [Hit]) {
+            for (r, h) in rays.chunks($k).zip(hits.chunks_mut($k)) {
+                let (mut p, valid) = <$packet>::from_rays(r);
+                scene.$intersect(&mut p, valid);
+                for (i, out) in h.iter_mut().enumerate() {
+                    *out = p.hit(i);
+                }
+            }
+        }
+
+        pub(super) fn $occluded(scene: &Scene, rays: &[Ray], out: &mut [bool]) {
+            for (r, o) in rays.chunks($k).zip(out.chunks_mut($k)) {
+                let (p, valid) = <$packet>::from_rays(r);
+                let bits = scene.$occluded(&p, valid);
+                for (i, x) in o.iter_mut().enumerate() {
+                    *x = bits >> i & 1 != 0;
+                }
+            }
+        }
+    };
+}
+
+mod packets {
+    use super::*;
+    use crate::ray::{RayPacket8, RayPacket16};
+    packet_kernels!(intersect8, occluded8, RayPacket8, 8);
+    packet_kernels!(intersect16, occluded16, RayPacket16, 16);
+}
+
+fn stream_intersect(scene: &Scene, rays: &[Ray], hits: &mut [Hit]) {
+    scene.intersect_batch(rays, hits);
+}
+
+fn stream_occluded(scene: &Scene, rays: &[Ray], out: &mut [bool]) {
+    scene.occluded_batch(rays, out);
+}
+
 /// Every raypack kernel that benchmarks time and the Embree cross-check verifies. One line
-/// per kernel; packet kernels receive consecutive rays (4×4 tiles for primary rays).
+/// per kernel; packet kernels receive consecutive rays (4×4 tiles for primary rays). The
+/// stream kernels are what `Scene::intersect_stream` / `occluded_stream` run on each thread's
+/// chunk (here the bench spreads the chunks over threads itself).
 pub const RAYPACK_KERNELS: &[RaypackKernel] = &[
     RaypackKernel { name: "bvh2 reference intersect1", kernel: Kernel::Intersect(reference_intersect1) },
     RaypackKernel { name: "bvh2 reference occluded1", kernel: Kernel::Occluded(reference_occluded1) },
     RaypackKernel { name: "Scene::intersect1", kernel: Kernel::Intersect(scene_intersect1) },
     RaypackKernel { name: "Scene::occluded1", kernel: Kernel::Occluded(scene_occluded1) },
+    RaypackKernel { name: "Scene::intersect8", kernel: Kernel::Intersect(packets::intersect8) },
+    RaypackKernel { name: "Scene::occluded8", kernel: Kernel::Occluded(packets::occluded8) },
+    RaypackKernel { name: "Scene::intersect16", kernel: Kernel::Intersect(packets::intersect16) },
+    RaypackKernel { name: "Scene::occluded16", kernel: Kernel::Occluded(packets::occluded16) },
+    RaypackKernel { name: "Scene::intersect_stream", kernel: Kernel::Intersect(stream_intersect) },
+    RaypackKernel { name: "Scene::occluded_stream", kernel: Kernel::Occluded(stream_occluded) },
 ];
 
-/// Bytes of raypack's acceleration structure over `scene` (nodes and primitive-id arrays;
-/// the triangles themselves live in the scene store and are not counted).
+/// Bytes of raypack's acceleration structure over `scene`: the BVH8 nodes and its leaf blocks
+/// (which hold their own copies of the triangles, as Embree's `Triangle4` leaves do), the
+/// structure every kernel but the reference traverses.
 pub fn raypack_accel_bytes(scene: &Scene) -> usize {
-    let bvh = scene.bvh2();
-    bvh.nodes.len() * std::mem::size_of::<Bvh2Node>() + bvh.prim_ids.len() * std::mem::size_of::<u32>()
+    scene.bvh8().bytes()
 }
 
 /// A traceable method of either tracer, bound to its scene.

@@ -418,7 +418,7 @@ fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     }
     let build = BuildFigures {
         tracer: "raypack",
-        quality: format!("bvh2 {}", format!("{quality:?}").to_lowercase()),
+        quality: format!("bvh8 {}", format!("{quality:?}").to_lowercase()),
         seconds,
         bytes: raypack_accel_bytes(&scene) as u64,
     };

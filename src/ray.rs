@@ -7,7 +7,11 @@
 use crate::math::{Vec3, safe_recip3};
 
 /// A ray `origin + t * dir` for `t` in `(tnear, tfar]`.
+///
+/// `repr(C)`: eight consecutive `f32` (origin, direction, `tnear`, `tfar`), so that packet
+/// kernels can transpose rays into lanes with vector shuffles ([`transpose_rays`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
 pub struct Ray {
     /// Origin.
     pub origin: Vec3,
@@ -54,6 +58,36 @@ impl Ray {
     pub fn inv_dir(&self) -> Vec3 {
         safe_recip3(self.dir)
     }
+}
+
+const _: () = assert!(std::mem::size_of::<Ray>() == 32 && std::mem::align_of::<Ray>() == 4);
+
+/// The rows `origin.x, origin.y, origin.z, dir.x, dir.y, dir.z, tnear, tfar` of up to 16
+/// rays (lanes past `rays.len()` repeat the first ray), by two 8 x 8 transposes.
+#[inline(always)]
+pub fn transpose_rays(rays: &[Ray]) -> [[f32; 16]; 8] {
+    use crate::simd::F32x8;
+    let n = rays.len().min(16);
+    let load = |i: usize| {
+        let r = if i < n { &rays[i] } else { &rays[0] };
+        // SAFETY: `Ray` is `repr(C)` of eight `f32` (asserted above); the read is unaligned.
+        F32x8::new(unsafe { (r as *const Ray as *const [f32; 8]).read_unaligned() })
+    };
+    let mut rows = [[0.0f32; 16]; 8];
+    if n == 0 {
+        return rows;
+    }
+    let lo = F32x8::transpose(std::array::from_fn(load));
+    for (row, v) in rows.iter_mut().zip(lo) {
+        row[..8].copy_from_slice(v.as_array());
+    }
+    if n > 8 {
+        let hi = F32x8::transpose(std::array::from_fn(|i| load(i + 8)));
+        for (row, v) in rows.iter_mut().zip(hi) {
+            row[8..].copy_from_slice(v.as_array());
+        }
+    }
+    rows
 }
 
 /// The closest (or any) intersection found along a ray.
@@ -155,10 +189,21 @@ macro_rules! ray_packet {
             /// those lanes.
             pub fn from_rays(rays: &[Ray]) -> (Self, $mask) {
                 assert!(rays.len() <= $k, "at most {} rays per packet", $k);
-                let mut p = Self::default();
-                for (i, r) in rays.iter().enumerate() {
-                    p.set_ray(i, r);
-                }
+                let rows = transpose_rays(rays);
+                let row = |k: usize| -> [f32; $k] { rows[k][..$k].try_into().expect("K lanes") };
+                let p = Self {
+                    org_x: row(0),
+                    org_y: row(1),
+                    org_z: row(2),
+                    dir_x: row(3),
+                    dir_y: row(4),
+                    dir_z: row(5),
+                    tnear: row(6),
+                    tfar: row(7),
+                    u: [0.0; $k],
+                    v: [0.0; $k],
+                    prim: [Hit::NONE; $k],
+                };
                 let mask = if rays.len() == $k { Self::ALL } else { ((1u32 << rays.len()) - 1) as $mask };
                 (p, mask)
             }

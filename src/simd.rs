@@ -158,32 +158,159 @@ macro_rules! impl_lanes {
             }
             #[inline(always)]
             fn reduce_min(self) -> f32 {
-                // Pairwise halving (vectorises to a few shuffles and minps; no NaN handling).
-                let mut m = self.to_array();
-                let mut n = $n;
-                while n > 1 {
-                    n /= 2;
-                    for i in 0..n {
-                        m[i] = if m[i + n] < m[i] { m[i + n] } else { m[i] };
-                    }
-                }
-                m[0]
+                reduce::min(self)
             }
             #[inline(always)]
             fn reduce_max(self) -> f32 {
-                let mut m = self.to_array();
-                let mut n = $n;
-                while n > 1 {
-                    n /= 2;
-                    for i in 0..n {
-                        m[i] = if m[i + n] > m[i] { m[i + n] } else { m[i] };
-                    }
-                }
-                m[0]
+                reduce::max(self)
             }
         }
     };
 }
+/// Horizontal min / max: a few shuffles and `minps` / `maxps` (no NaN handling). The
+/// portable fallback halves an array, which LLVM vectorises less well.
+mod reduce {
+    use super::*;
+
+    pub trait Reduce: Copy {
+        fn min(self) -> f32;
+        fn max(self) -> f32;
+    }
+
+    #[inline(always)]
+    pub fn min<V: Reduce>(v: V) -> f32 {
+        v.min()
+    }
+
+    #[inline(always)]
+    pub fn max<V: Reduce>(v: V) -> f32 {
+        v.max()
+    }
+
+    #[allow(dead_code)]
+    #[inline(always)]
+    fn halving<const N: usize>(mut m: [f32; N], take_min: bool) -> f32 {
+        let mut n = N;
+        while n > 1 {
+            n /= 2;
+            for i in 0..n {
+                let (a, b) = (m[i], m[i + n]);
+                m[i] = if (b < a) == take_min { b } else { a };
+            }
+        }
+        m[0]
+    }
+
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
+    mod x86 {
+        use std::arch::x86_64::*;
+
+        #[inline(always)]
+        pub fn min4(v: __m128) -> f32 {
+            // SAFETY: compiled only when the target has these instructions (the cfg above);
+            // they only read and write registers.
+            unsafe {
+                let m = _mm_min_ps(v, _mm_movehl_ps(v, v));
+                _mm_cvtss_f32(_mm_min_ss(m, _mm_movehdup_ps(m)))
+            }
+        }
+
+        #[inline(always)]
+        pub fn max4(v: __m128) -> f32 {
+            // SAFETY: as in `min4`.
+            unsafe {
+                let m = _mm_max_ps(v, _mm_movehl_ps(v, v));
+                _mm_cvtss_f32(_mm_max_ss(m, _mm_movehdup_ps(m)))
+            }
+        }
+
+        #[inline(always)]
+        pub fn min8(v: __m256) -> f32 {
+            // SAFETY: as in `min4`.
+            min4(unsafe { _mm_min_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps::<1>(v)) })
+        }
+
+        #[inline(always)]
+        pub fn max8(v: __m256) -> f32 {
+            // SAFETY: as in `min4`.
+            max4(unsafe { _mm_max_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps::<1>(v)) })
+        }
+    }
+
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
+    impl Reduce for f32x4 {
+        #[inline(always)]
+        fn min(self) -> f32 {
+            x86::min4(self.into())
+        }
+        #[inline(always)]
+        fn max(self) -> f32 {
+            x86::max4(self.into())
+        }
+    }
+
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
+    impl Reduce for f32x8 {
+        #[inline(always)]
+        fn min(self) -> f32 {
+            x86::min8(self.into())
+        }
+        #[inline(always)]
+        fn max(self) -> f32 {
+            x86::max8(self.into())
+        }
+    }
+
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx512f"))]
+    impl Reduce for f32x16 {
+        #[inline(always)]
+        fn min(self) -> f32 {
+            use std::arch::x86_64::*;
+            let v: __m512 = self.into();
+            // SAFETY: compiled only when the target has AVX-512F (the cfg above); register-only
+            // operations.
+            x86::min8(unsafe {
+                let h = _mm512_castps512_ps256(v);
+                let l = _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(v)));
+                _mm256_min_ps(h, l)
+            })
+        }
+        #[inline(always)]
+        fn max(self) -> f32 {
+            use std::arch::x86_64::*;
+            let v: __m512 = self.into();
+            // SAFETY: as in `min`.
+            x86::max8(unsafe {
+                let h = _mm512_castps512_ps256(v);
+                let l = _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(v)));
+                _mm256_max_ps(h, l)
+            })
+        }
+    }
+
+    #[allow(unused_macros)]
+    macro_rules! portable {
+        ($t:ty, $n:expr) => {
+            impl Reduce for $t {
+                #[inline(always)]
+                fn min(self) -> f32 {
+                    halving::<$n>(self.to_array(), true)
+                }
+                #[inline(always)]
+                fn max(self) -> f32 {
+                    halving::<$n>(self.to_array(), false)
+                }
+            }
+        };
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx")))]
+    portable!(f32x4, 4);
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx")))]
+    portable!(f32x8, 8);
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx512f")))]
+    portable!(f32x16, 16);
+}
+
 impl_lanes!(f32x4, 4);
 impl_lanes!(f32x8, 8);
 impl_lanes!(f32x16, 16);
@@ -265,6 +392,21 @@ mod tests {
         assert_eq!(Lanes::select(m, a, b).lane(0), 3.0);
         assert_eq!(F32x4::new([4.0, -1.0, 2.0, 8.0]).reduce_min(), -1.0);
         assert_eq!(F32x4::new([4.0, -1.0, 2.0, 8.0]).reduce_max(), 8.0);
+        for k in 0..16 {
+            let v: [f32; 16] = std::array::from_fn(|i| {
+                if i == k {
+                    -5.0
+                } else if i == 15 - k {
+                    9.0
+                } else {
+                    i as f32
+                }
+            });
+            let (x16, x8) = (F32x16::new(v), F32x8::new(v[..8].try_into().unwrap()));
+            assert_eq!((x16.reduce_min(), x16.reduce_max()), (-5.0, 9.0));
+            let (lo8, hi8) = v[..8].iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+            assert_eq!((x8.reduce_min(), x8.reduce_max()), (lo8, hi8));
+        }
         assert_eq!(bits(0b1010_0001).collect::<Vec<_>>(), vec![0, 5, 7]);
     }
 }

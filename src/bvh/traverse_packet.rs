@@ -77,16 +77,23 @@ impl<V: Lanes> PacketRays<V> {
     /// invalid rays, are inactive.
     #[inline(always)]
     pub fn new(rays: &[Ray], mask: u32) -> Self {
-        let mut rows = [[0.0f32; 16]; 8];
-        for (i, r) in rays.iter().take(V::LANES).enumerate() {
-            let vals = [r.origin.x, r.origin.y, r.origin.z, r.dir.x, r.dir.y, r.dir.z, r.tnear, r.tfar];
-            for (row, x) in rows.iter_mut().zip(vals) {
-                row[i] = x;
-            }
-        }
+        let rows = crate::ray::transpose_rays(&rays[..rays.len().min(V::LANES)]);
         let valid = if rays.len() >= V::LANES { mask } else { mask & ((1u32 << rays.len()) - 1) };
         let [ox, oy, oz, dx, dy, dz, tn, tf] = &rows;
         Self::from_rows([ox, oy, oz], [dx, dy, dz], tn, tf, valid)
+    }
+
+    /// Stores the hit rows (`t` = current `tfar`, `u`, `v`, primitive id) of all lanes.
+    #[inline(always)]
+    pub fn store_hits(&self, t: &mut [f32], u: &mut [f32], v: &mut [f32], prim: &mut [u32]) {
+        let mut p = [0.0f32; 16];
+        self.tfar.store(t);
+        self.u.store(u);
+        self.v.store(v);
+        self.prim.store(&mut p);
+        for (o, x) in prim.iter_mut().zip(p.iter()).take(V::LANES) {
+            *o = x.to_bits();
+        }
     }
 
     /// Lane form of the rows of a `RayPacket8` / `RayPacket16` (each row at least K long);

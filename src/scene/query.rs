@@ -62,14 +62,19 @@ macro_rules! packet_queries {
                 valid as u32,
             );
             intersect_hybrid(&self.bvh8, &mut rays, threshold());
+            let (mut t, mut u, mut v, mut prim) = ([0.0f32; 16], [0.0f32; 16], [0.0f32; 16], [0u32; 16]);
+            rays.store_hits(&mut t, &mut u, &mut v, &mut prim);
             for i in crate::simd::bits(valid as u32) {
-                let mut h = rays.hit(i);
-                p.prim[i] = h.prim;
-                if h.is_hit() {
-                    self.finish_hit(&p.ray(i), &mut h);
-                    p.tfar[i] = h.t;
-                    p.u[i] = h.u;
-                    p.v[i] = h.v;
+                p.prim[i] = prim[i];
+                if prim[i] != Hit::NONE {
+                    p.tfar[i] = t[i];
+                    p.u[i] = u[i];
+                    p.v[i] = v[i];
+                    if self.has_spheres() {
+                        let mut h = p.hit(i);
+                        self.finish_hit(&p.ray(i), &mut h);
+                        (p.u[i], p.v[i]) = (h.u, h.v);
+                    }
                 }
             }
         }
@@ -139,10 +144,13 @@ impl Scene {
         for (r, h) in rays.chunks(16).zip(hits.chunks_mut(16)) {
             let mut p = PacketRays::<F32x16>::new(r, u32::MAX);
             intersect_hybrid(&self.bvh8, &mut p, th);
+            let (mut t, mut u, mut v, mut prim) = ([0.0f32; 16], [0.0f32; 16], [0.0f32; 16], [0u32; 16]);
+            p.store_hits(&mut t, &mut u, &mut v, &mut prim);
             for (i, out) in h.iter_mut().enumerate() {
-                let mut hit = p.hit(i);
-                self.finish_hit(&r[i], &mut hit);
-                *out = hit;
+                *out = if prim[i] == Hit::NONE { Hit::MISS } else { Hit { t: t[i], u: u[i], v: v[i], prim: prim[i] } };
+                if self.has_spheres() {
+                    self.finish_hit(&r[i], out);
+                }
             }
         }
     }

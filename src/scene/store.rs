@@ -171,6 +171,12 @@ impl Scene {
         }
     }
 
+    /// True when the scene holds spheres (whose hits need [`Scene::finish_hit`]).
+    #[inline(always)]
+    pub(crate) fn has_spheres(&self) -> bool {
+        !self.spheres.is_empty()
+    }
+
     /// Fills in the surface coordinates of a sphere hit (the SIMD kernels leave them 0).
     #[inline]
     pub(crate) fn finish_hit(&self, ray: &Ray, hit: &mut Hit) {
