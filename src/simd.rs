@@ -399,7 +399,7 @@ mod tests {
                 } else if i == 15 - k {
                     9.0
                 } else {
-                    i as f32
+                    i as f32 * 0.1
                 }
             });
             let (x16, x8) = (F32x16::new(v), F32x8::new(v[..8].try_into().unwrap()));
