@@ -66,6 +66,8 @@ pub trait Lanes:
     fn vmax(self, o: Self) -> Self;
     /// True lanes where the value is finite.
     fn is_finite(self) -> Self;
+    /// `self * a - b` with one rounding (FMA) where the target has it.
+    fn mul_sub(self, a: Self, b: Self) -> Self;
     /// Correctly rounded square root.
     fn sqrt(self) -> Self;
     /// Magnitude of `self` with the sign of `sign`.
@@ -146,6 +148,10 @@ macro_rules! impl_lanes {
             #[inline(always)]
             fn is_finite(self) -> Self {
                 <$t>::is_finite(self)
+            }
+            #[inline(always)]
+            fn mul_sub(self, a: Self, b: Self) -> Self {
+                <$t>::mul_sub(self, a, b)
             }
             #[inline(always)]
             fn sqrt(self) -> Self {

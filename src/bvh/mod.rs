@@ -16,7 +16,6 @@ pub mod node;
 pub mod stats;
 pub mod traverse1;
 pub mod traverse_packet;
-pub mod tune;
 pub mod validate;
 
 pub use build_sah::{BuildOptions, BuildPrim, BuildQuality, SplitMethod, build_bvh2};

@@ -7,7 +7,6 @@
 //! that only a few of the rays want (incoherent rays).
 
 use crate::bvh::traverse_packet::{PacketRays, intersect_hybrid, occluded_hybrid};
-use crate::bvh::tune;
 use crate::ray::{Hit, Ray, RayPacket8, RayPacket16};
 use crate::scene::Scene;
 use crate::simd::{F32x8, F32x16};
@@ -26,10 +25,7 @@ const STREAM_CHUNK: usize = 1024;
 
 #[inline(always)]
 fn threshold() -> usize {
-    match tune::knob(tune::THRESHOLD) {
-        0 => HYBRID_THRESHOLD,
-        k => k as usize,
-    }
+    HYBRID_THRESHOLD
 }
 
 macro_rules! packet_queries {
