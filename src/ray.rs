@@ -66,26 +66,26 @@ const _: () = assert!(std::mem::size_of::<Ray>() == 32 && std::mem::align_of::<R
 /// rays (lanes past `rays.len()` repeat the first ray), by two 8 x 8 transposes.
 #[inline(always)]
 pub fn transpose_rays(rays: &[Ray]) -> [[f32; 16]; 8] {
-    use crate::simd::F32x8;
     let n = rays.len().min(16);
-    let load = |i: usize| {
-        let r = if i < n { &rays[i] } else { &rays[0] };
-        // SAFETY: `Ray` is `repr(C)` of eight `f32` (asserted above); the read is unaligned.
-        F32x8::new(unsafe { (r as *const Ray as *const [f32; 8]).read_unaligned() })
-    };
+    if n == 16 {
+        return transpose16(rays[..16].try_into().expect("16 rays"));
+    }
+    let mut full = [rays.first().copied().unwrap_or(Ray::new(Vec3::ZERO, Vec3::X)); 16];
+    full[..n].copy_from_slice(&rays[..n]);
+    transpose16(&full)
+}
+
+#[inline(always)]
+fn transpose16(rays: &[Ray; 16]) -> [[f32; 16]; 8] {
+    use crate::simd::F32x8;
+    // SAFETY: `Ray` is `repr(C)` of eight `f32` (asserted above); the read is unaligned.
+    let load = |r: &Ray| F32x8::new(unsafe { (r as *const Ray as *const [f32; 8]).read_unaligned() });
+    let lo = F32x8::transpose(std::array::from_fn(|i| load(&rays[i])));
+    let hi = F32x8::transpose(std::array::from_fn(|i| load(&rays[i + 8])));
     let mut rows = [[0.0f32; 16]; 8];
-    if n == 0 {
-        return rows;
-    }
-    let lo = F32x8::transpose(std::array::from_fn(load));
-    for (row, v) in rows.iter_mut().zip(lo) {
-        row[..8].copy_from_slice(v.as_array());
-    }
-    if n > 8 {
-        let hi = F32x8::transpose(std::array::from_fn(|i| load(i + 8)));
-        for (row, v) in rows.iter_mut().zip(hi) {
-            row[8..].copy_from_slice(v.as_array());
-        }
+    for ((row, a), b) in rows.iter_mut().zip(lo).zip(hi) {
+        row[..8].copy_from_slice(a.as_array());
+        row[8..].copy_from_slice(b.as_array());
     }
     rows
 }

@@ -256,7 +256,13 @@ impl<V: Lanes> PacketRays<V> {
 
     /// The lanes of `active` (bit mask) blocked by anything in `leaf`, as a bit mask.
     #[inline(always)]
-    fn occluded_leaf_bits<T: TriBlock>(&self, bvh: &Bvh8<T>, leaf: NodeRef, active: u32) -> u32 {
+    fn occluded_leaf_bits<T: TriBlock>(
+        &self,
+        bvh: &Bvh8<T>,
+        leaf: NodeRef,
+        active: u32,
+        cache: &mut OccluderCache,
+    ) -> u32 {
         let mut occ = 0u32;
         let range = leaf.first_block()..leaf.first_block() + leaf.block_count();
         match leaf.kind() {
@@ -275,9 +281,13 @@ impl<V: Lanes> PacketRays<V> {
                             &Vec3x::splat(e1),
                             &Vec3x::splat(e2),
                         );
-                        occ |= m.bitmask() & active;
-                        if active & !occ == 0 {
-                            return occ;
+                        let blocked = m.bitmask() & active;
+                        if blocked != 0 {
+                            occ |= blocked;
+                            cache.tri = Some([v0, e1, e2]);
+                            if active & !occ == 0 {
+                                return occ;
+                            }
                         }
                     }
                 }
@@ -419,6 +429,19 @@ pub fn intersect_hybrid<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, rays: &mut PacketR
     }
 }
 
+/// The triangle (`v0`, `e1`, `e2`) that last blocked a ray of a packet. Coherent shadow rays
+/// are mostly blocked by the same few triangles, so testing the last occluder before
+/// traversing often settles a whole packet with one test (the "shadow cache" of Haines and
+/// Greenberg, "The Light Buffer", IEEE CG&A 1986). Any hit is as good as another for
+/// occlusion, so the answers do not change.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct OccluderCache {
+    tri: Option<[crate::math::Vec3; 3]>,
+}
+
+/// Test a node's leaf children before descending into its inner children (any hit only).
+const LEAVES_FIRST: bool = true;
+
 /// Hybrid any-hit traversal; returns the bit mask of occluded lanes.
 ///
 /// Occlusion needs no distances, so the stack holds lane masks (which rays want a subtree)
@@ -427,18 +450,38 @@ pub fn intersect_hybrid<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, rays: &mut PacketR
 /// Subtrees wanted by at most `threshold` rays are finished ray by ray; leaves wanted by fewer
 /// rays than they hold triangles are tested ray by ray (one ray against the whole block),
 /// others triangle by triangle (all rays against one triangle).
-pub fn occluded_hybrid<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, rays: &PacketRays<V>, threshold: usize) -> u32 {
+pub fn occluded_hybrid<V: Lanes, T: TriBlock>(
+    bvh: &Bvh8<T>,
+    rays: &PacketRays<V>,
+    threshold: usize,
+    cache: &mut OccluderCache,
+) -> u32 {
     let all = rays.active_mask();
     let mut occluded = 0u32;
     if all == 0 {
         return 0;
+    }
+    if let Some([v0, e1, e2]) = cache.tri {
+        let (m, ..) = moller_trumbore(
+            &rays.org,
+            &rays.dir,
+            rays.tnear,
+            rays.tfar,
+            &Vec3x::splat(v0),
+            &Vec3x::splat(e1),
+            &Vec3x::splat(e2),
+        );
+        occluded = m.bitmask() & all;
+        if occluded == all {
+            return occluded;
+        }
     }
     let frustum = Frustum::new(std::slice::from_ref(rays));
     let mut refs = [const { MaybeUninit::<NodeRef>::uninit() }; BVH8_STACK];
     let mut masks = [const { MaybeUninit::<u32>::uninit() }; BVH8_STACK];
     let mut sp = 0usize;
     let mut cur = bvh.root();
-    let mut active = all;
+    let mut active = all & !occluded;
     loop {
         'descend: loop {
             if active.count_ones() as usize <= threshold {
@@ -451,7 +494,7 @@ pub fn occluded_hybrid<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, rays: &PacketRays<V
                 break 'descend;
             }
             if cur.is_leaf() {
-                occluded |= rays.occluded_leaf_bits(bvh, cur, active);
+                occluded |= rays.occluded_leaf_bits(bvh, cur, active, cache);
                 break 'descend;
             }
             let node = &bvh.nodes[cur.node_index()];
@@ -463,6 +506,8 @@ pub fn occluded_hybrid<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, rays: &PacketRays<V
             let candidates = if frustum.is_some() { candidates } else { (1u32 << candidates) - 1 };
             let mut next = NodeRef::EMPTY;
             let mut next_active = 0;
+            let mut leaves = 0u32;
+            let mut leaf_masks = [0u32; 8];
             for i in crate::simd::bits(candidates) {
                 let (m, _) = rays.intersect_box(node, i);
                 let m = m.bitmask() & active;
@@ -471,6 +516,11 @@ pub fn occluded_hybrid<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, rays: &PacketRays<V
                 }
                 let child = node.children[i];
                 bvh.prefetch(child);
+                if child.is_leaf() && LEAVES_FIRST {
+                    leaves |= 1 << i;
+                    leaf_masks[i] = m;
+                    continue;
+                }
                 if !next.is_empty() {
                     refs[sp] = MaybeUninit::new(next);
                     masks[sp] = MaybeUninit::new(next_active);
@@ -479,7 +529,19 @@ pub fn occluded_hybrid<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, rays: &PacketRays<V
                 next = child;
                 next_active = m;
             }
-            if next.is_empty() {
+            // Leaves first: they cost one test each, and the large ones near the root (walls,
+            // floors) are the likeliest occluders.
+            for i in crate::simd::bits(leaves) {
+                let m = leaf_masks[i] & !occluded;
+                if m != 0 {
+                    occluded |= rays.occluded_leaf_bits(bvh, node.children[i], m, cache);
+                    if all & !occluded == 0 {
+                        return occluded;
+                    }
+                }
+            }
+            next_active &= !occluded;
+            if next.is_empty() || next_active == 0 {
                 break 'descend;
             }
             cur = next;

@@ -24,6 +24,14 @@ use crate::simd::{F32x4, F32x8, Lanes, Vec3x};
 /// (either side may be a broadcast). Returns `(hit mask, t, u, v)`; a lane hits when
 /// `t` lies in `(tnear, tfar]`, `u, v >= 0`, `u + v <= 1` and the determinant is finite and
 /// non-zero — exactly the conditions of [`intersect_triangle_edges`].
+///
+/// The division is skipped when no lane can pass: Embree's division-free comparisons of the
+/// unscaled `U, V, T` against `|det|` (with their signs flipped by `det`'s) decide, with a
+/// relative slack of 2^-16, which lanes might hit; only if one might is `1 / det` computed and
+/// the reference's exact tests applied. The slack exceeds the two roundings that separate
+/// `u = U * (1/det)` from `U / det` (and the one of `U + V`), so the filter never rejects a
+/// lane the exact test would accept; lanes whose `|det|` is below 2^-100 (where `u` could
+/// round to `-0.0`) or whose `U, V, T` are not finite always pass it.
 #[inline(always)]
 pub fn moller_trumbore<V: Lanes>(
     origin: &Vec3x<V>,
@@ -34,17 +42,39 @@ pub fn moller_trumbore<V: Lanes>(
     e1: &Vec3x<V>,
     e2: &Vec3x<V>,
 ) -> (V, V, V, V) {
+    const SLACK: f32 = 1.0 / 65536.0;
+    const TINY_DET: f32 = 7.888_609e-31; // 2^-100
     let zero = V::splat(0.0);
     let one = V::splat(1.0);
     let p = dir.cross(*e2);
     let det = e1.dot(p);
     let det_ok = !det.eq(zero) & det.is_finite();
-    let inv_det = one / det;
     let s = origin.sub(*v0);
-    let u = s.dot(p) * inv_det;
+    let uu = s.dot(p);
     let q = s.cross(*e1);
-    let v = dir.dot(q) * inv_det;
-    let t = e2.dot(q) * inv_det;
+    let vv = dir.dot(q);
+    let tt = e2.dot(q);
+    // Division-free necessary conditions (see above).
+    let sign = one.copysign(det);
+    let a = det & !V::splat(-0.0);
+    let (u1, v1, t1) = (uu * sign, vv * sign, tt * sign);
+    let lo = -(a * V::splat(SLACK));
+    let hi = a * V::splat(1.0 + SLACK);
+    let maybe = u1.ge(lo)
+        & u1.le(hi)
+        & v1.ge(lo)
+        & (u1 + v1).le(hi)
+        & t1.gt(tnear * a * V::splat(1.0 - SLACK))
+        & t1.le(tfar * a * V::splat(1.0 + SLACK));
+    let doubtful = a.lt(V::splat(TINY_DET)) | !(uu.is_finite() & vv.is_finite() & tt.is_finite());
+    if (det_ok & (maybe | doubtful)).bitmask() == 0 {
+        return (zero, zero, zero, zero);
+    }
+    // The reference's arithmetic, bit for bit.
+    let inv_det = one / det;
+    let u = uu * inv_det;
+    let v = vv * inv_det;
+    let t = tt * inv_det;
     let inside = u.ge(zero) & u.le(one) & !v.lt(zero) & !(u + v).gt(one);
     let valid = det_ok & inside & t.gt(tnear) & t.le(tfar);
     (valid, t, u, v)

@@ -6,7 +6,7 @@
 //! (camera and shadow rays), per-lane box tests always, and single-ray traversal for subtrees
 //! that only a few of the rays want (incoherent rays).
 
-use crate::bvh::traverse_packet::{PacketRays, intersect_hybrid, occluded_hybrid};
+use crate::bvh::traverse_packet::{OccluderCache, PacketRays, intersect_hybrid, occluded_hybrid};
 use crate::ray::{Hit, Ray, RayPacket8, RayPacket16};
 use crate::scene::Scene;
 use crate::simd::{F32x8, F32x16};
@@ -100,7 +100,7 @@ macro_rules! packet_queries {
                 &p.tfar,
                 valid as u32,
             );
-            occluded_hybrid(&self.bvh8, &rays, threshold()) as $mask
+            occluded_hybrid(&self.bvh8, &rays, threshold(), &mut OccluderCache::default()) as $mask
         }
     };
 }
@@ -137,15 +137,19 @@ impl Scene {
     pub fn intersect_batch(&self, rays: &[Ray], hits: &mut [Hit]) {
         assert_eq!(rays.len(), hits.len(), "one hit per ray");
         let th = threshold();
-        for (r, h) in rays.chunks(16).zip(hits.chunks_mut(16)) {
+        for (k, (r, h)) in rays.chunks(16).zip(hits.chunks_mut(16)).enumerate() {
+            prefetch_rays(rays, (k + 2) * 16);
             let mut p = PacketRays::<F32x16>::new(r, u32::MAX);
             intersect_hybrid(&self.bvh8, &mut p, th);
             let (mut t, mut u, mut v, mut prim) = ([0.0f32; 16], [0.0f32; 16], [0.0f32; 16], [0u32; 16]);
             p.store_hits(&mut t, &mut u, &mut v, &mut prim);
             for (i, out) in h.iter_mut().enumerate() {
-                *out = if prim[i] == Hit::NONE { Hit::MISS } else { Hit { t: t[i], u: u[i], v: v[i], prim: prim[i] } };
-                if self.has_spheres() {
-                    self.finish_hit(&r[i], out);
+                let miss = prim[i] == Hit::NONE;
+                *out = Hit { t: if miss { f32::INFINITY } else { t[i] }, u: u[i], v: v[i], prim: prim[i] };
+            }
+            if self.has_spheres() {
+                for (ray, out) in r.iter().zip(h.iter_mut()) {
+                    self.finish_hit(ray, out);
                 }
             }
         }
@@ -177,12 +181,25 @@ impl Scene {
     pub fn occluded_batch(&self, rays: &[Ray], occluded: &mut [bool]) {
         assert_eq!(rays.len(), occluded.len(), "one answer per ray");
         let th = threshold();
-        for (r, o) in rays.chunks(16).zip(occluded.chunks_mut(16)) {
+        let mut cache = OccluderCache::default();
+        for (k, (r, o)) in rays.chunks(16).zip(occluded.chunks_mut(16)).enumerate() {
+            prefetch_rays(rays, (k + 2) * 16);
             let p = PacketRays::<F32x16>::new(r, u32::MAX);
-            let bits = occluded_hybrid(&self.bvh8, &p, th);
+            let bits = occluded_hybrid(&self.bvh8, &p, th, &mut cache);
             for (i, x) in o.iter_mut().enumerate() {
                 *x = bits >> i & 1 != 0;
             }
+        }
+    }
+}
+
+/// Prefetches the 16 rays from `rays[start]` (eight cache lines), if there are any.
+#[inline(always)]
+fn prefetch_rays(rays: &[Ray], start: usize) {
+    if start + 16 <= rays.len() {
+        let p = rays[start..].as_ptr() as *const u8;
+        for line in 0..8 {
+            crate::bvh::bvh8::prefetch_line(p.wrapping_add(64 * line));
         }
     }
 }
