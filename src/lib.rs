@@ -20,6 +20,38 @@
 //! assert!(scene.occluded1(&Ray::new(Vec3::new(0.0, 0.0, -1.0), -Vec3::Z))); // the sphere
 //! # Ok::<(), raypack::SceneError>(())
 //! ```
+//!
+//! ## Queries
+//!
+//! In the style of Embree: `intersect*` finds the closest hit, `occluded*` answers whether
+//! anything lies on a segment; the suffix says how many rays a call takes.
+//!
+//! | call | rays | best for |
+//! |---|---|---|
+//! | [`Scene::intersect1`], [`Scene::occluded1`] | one [`Ray`] | anything; the simplest |
+//! | [`Scene::intersect8`], [`Scene::occluded8`] | a [`RayPacket8`] | coherent rays, AVX2 |
+//! | [`Scene::intersect16`], [`Scene::occluded16`] | a [`RayPacket16`] | coherent rays, AVX-512 |
+//! | [`Scene::intersect_stream`], [`Scene::occluded_stream`] | any slice, over all threads | batches of any kind: camera rays in small tiles, bounces, shadow rays |
+//!
+//! All of them traverse the same 8-wide BVH ([`Bvh8Node`], SoA leaf blocks of 8 triangles)
+//! and return bit-identical hit distances to the scalar reference
+//! ([`Scene::intersect1_reference`]); invalid rays ([`Ray::is_valid`]) miss.
+//!
+//! ```
+//! use raypack::{BuildOptions, Hit, Material, Ray, SceneBuilder, Vec3};
+//!
+//! let mut b = SceneBuilder::new();
+//! let mat = b.add_material(Material::default());
+//! b.add_sphere(Vec3::ZERO, 1.0, mat)?;
+//! let (scene, _) = b.commit(&BuildOptions::default());
+//! let rays: Vec<Ray> = (0..64).map(|i| Ray::new(Vec3::new(0.0, i as f32 * 0.05 - 1.6, 5.0), -Vec3::Z)).collect();
+//! let mut hits = vec![Hit::MISS; rays.len()];
+//! scene.intersect_stream(&rays, &mut hits);
+//! for (r, h) in rays.iter().zip(&hits) {
+//!     assert_eq!(h.t, scene.intersect1_reference(r).t);
+//! }
+//! # Ok::<(), raypack::SceneError>(())
+//! ```
 #![deny(missing_docs)]
 
 pub mod bench;

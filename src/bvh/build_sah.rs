@@ -54,6 +54,9 @@ pub struct BuildOptions {
     pub traversal_cost: f32,
     /// Use the watertight triangle test (Woop, Benthin, Wald 2013) instead of Möller–Trumbore.
     pub watertight: bool,
+    /// How the binary tree is collapsed into the 8-wide BVH the kernels traverse (costs and
+    /// leaf limits; see [`crate::bvh::CollapseOptions`]).
+    pub collapse: crate::bvh::CollapseOptions,
 }
 
 impl Default for BuildOptions {
@@ -65,6 +68,7 @@ impl Default for BuildOptions {
             split: SplitMethod::Sah,
             traversal_cost: 1.0,
             watertight: false,
+            collapse: crate::bvh::CollapseOptions::default(),
         }
     }
 }

@@ -129,6 +129,22 @@ impl NodeRef {
 /// rows by the sign of its direction (row `2 axis + (dir < 0)` is the near one) and the slab
 /// test needs no per-lane min/max. An empty slot has lower `+inf` and upper `-inf`: whatever
 /// the direction, its entry distance is `+inf` and its exit `-inf`, so it is never hit.
+///
+/// ```
+/// use raypack::{BuildOptions, Bvh8Node, Material, SceneBuilder, Vec3};
+///
+/// let mut b = SceneBuilder::new();
+/// let m = b.add_material(Material::default());
+/// for i in 0..3 {
+///     b.add_sphere(Vec3::new(i as f32 * 3.0, 0.0, 0.0), 1.0, m)?;
+/// }
+/// let (scene, _) = b.commit(&BuildOptions::default());
+/// let root: &Bvh8Node = &scene.bvh8().nodes[0];
+/// assert!(root.child_count() >= 1);
+/// assert!(root.bounds().contains(Vec3::new(6.5, 0.0, 0.0)));
+/// assert!(root.children[7].is_empty() && !root.child_bounds(7).is_valid()); // an unused slot
+/// # Ok::<(), raypack::SceneError>(())
+/// ```
 #[repr(C, align(64))]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Bvh8Node {

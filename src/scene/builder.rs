@@ -6,7 +6,7 @@
 //! triangles, non-positive radii) and counts them in the [`CommitReport`], as Embree does.
 //! An empty scene is legal: every ray misses.
 
-use crate::bvh::{BuildOptions, BuildPrim, Bvh8, CollapseOptions, build_bvh2, collapse};
+use crate::bvh::{BuildOptions, BuildPrim, Bvh8, build_bvh2, collapse};
 use crate::math::{Aabb, Vec3};
 use crate::scene::{Camera, Light, Material, MaterialId, Scene, SpheresSoa, TrianglesSoa};
 
@@ -275,7 +275,7 @@ impl SceneBuilder {
         let bounds = prims.iter().fold(Aabb::EMPTY, |b, p| b.union(&p.bounds));
         let bvh2 = build_bvh2(&mut prims, opts);
         let mut scene = Scene { triangles, spheres, materials, lights, camera, bounds, bvh2, bvh8: Bvh8::default() };
-        scene.bvh8 = collapse(&scene.bvh2, |id| scene.prim_shape(id), &CollapseOptions::default());
+        scene.bvh8 = collapse(&scene.bvh2, |id| scene.prim_shape(id), &opts.collapse);
         (scene, report)
     }
 }

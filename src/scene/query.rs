@@ -164,7 +164,7 @@ impl Scene {
     /// let m = b.add_material(Material::default());
     /// b.add_sphere(Vec3::ZERO, 1.0, m)?;
     /// let (scene, _) = b.commit(&BuildOptions::default());
-    /// let rays: Vec<Ray> = (0..40).map(|i| Ray::segment(Vec3::new(i as f32 * 0.05, 0.0, 5.0), -Vec3::Z, 0.0, 10.0)).collect();
+    /// let rays: Vec<Ray> = (0..40).map(|i| Ray::segment(Vec3::new(i as f32 * 0.05 + 0.025, 0.0, 5.0), -Vec3::Z, 0.0, 10.0)).collect();
     /// let mut blocked = vec![false; rays.len()];
     /// scene.occluded_stream(&rays, &mut blocked);
     /// assert_eq!(blocked.iter().filter(|&&b| b).count(), 20); // x < 1 passes through the sphere
