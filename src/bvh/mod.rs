@@ -3,7 +3,7 @@
 //!
 //! * [`build_sah`] builds a binary BVH ([`Bvh2`]) with a binned surface area heuristic.
 //! * [`Bvh2`] is also the scalar reference traversal that faster kernels are tested against.
-//! * [`collapse`] turns it into the 8-wide [`Bvh8`] ([`Bvh8Node`], SoA leaf blocks) that the
+//! * [`collapse()`] turns it into the 8-wide [`Bvh8`] ([`Bvh8Node`], SoA leaf blocks) that the
 //!   SIMD kernels of [`traverse1`] (single rays) and [`traverse_packet`] (8/16-ray packets,
 //!   tiles of camera rays) traverse.
 

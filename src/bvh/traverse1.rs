@@ -11,6 +11,14 @@
 //! sorts the pushed entries by distance (popped entries farther than the closest hit so far
 //! are skipped).
 //!
+//! Measured against visiting hit children in slot order (no sorting; 1 thread, best of 9,
+//! Mrays/s, Embree's `rtcIntersect1` in the same process for scale): on the Stanford dragon
+//! camera rays 10.1 unsorted against 18.4 sorted (Embree 14.4), diffuse bounces 2.17 against
+//! 2.58 (Embree 2.90 / 2.51 in the two runs); on the CS184 beetle, which fits in cache,
+//! 23.6 against 24.3. The static per-octant child order of Fuetterling et al. (no sorting at
+//! run time, an order table per node) was not tried: the 256-byte node has no room for the
+//! tables without narrowing the child references.
+//!
 //! Leaves are runs of SoA blocks tested one ray against all M triangles at once
 //! ([`crate::geometry::tri_block`]).
 

@@ -5,6 +5,13 @@
 //! to the rays they are given: a frustum prefilter when the packet's direction signs agree
 //! (camera and shadow rays), per-lane box tests always, and single-ray traversal for subtrees
 //! that only a few of the rays want (incoherent rays).
+//!
+//! Streams therefore trace every batch as 16-ray packets: choosing single rays for incoherent
+//! batches was measured and lost (1 thread, best of 7, Mrays/s, diffuse bounces: Stanford
+//! dragon 3.17 with packets against 2.58 ray by ray, CS184 CBbunny 14.3 against 10.5, beetle
+//! 12.3 against 8.4), and so did tiles of 4 packets under one frustum (see
+//! [`crate::bvh::traverse_packet`]). Shadow-ray streams also carry an [`OccluderCache`] from
+//! packet to packet.
 
 use crate::bvh::traverse_packet::{OccluderCache, PacketRays, intersect_hybrid, occluded_hybrid};
 use crate::ray::{Hit, Ray, RayPacket8, RayPacket16};
