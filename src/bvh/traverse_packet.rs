@@ -429,11 +429,17 @@ pub fn intersect_hybrid<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, rays: &mut PacketR
     }
 }
 
-/// The triangle (`v0`, `e1`, `e2`) that last blocked a ray of a packet. Coherent shadow rays
-/// are mostly blocked by the same few triangles, so testing the last occluder before
-/// traversing often settles a whole packet with one test (the "shadow cache" of Haines and
-/// Greenberg, "The Light Buffer", IEEE CG&A 1986). Any hit is as good as another for
-/// occlusion, so the answers do not change.
+/// The triangle that last blocked a ray of a packet, carried from packet to packet along a
+/// shadow-ray stream and tested before traversal starts. Coherent shadow rays are mostly
+/// blocked by the same few triangles, so the last occluder often settles a whole packet with
+/// one test (the "shadow cache" of Haines and Greenberg, "The Light Buffer", IEEE CG&A 1986).
+/// Any hit is as good as another for occlusion, so the answers do not change. On the CS184
+/// CBbunny, whose shadow rays mostly end on the ceiling, it lifts 16-ray packets from 71 to
+/// 450 Mrays/s (1 thread); on the beetle from 29 to 35, on the dragon from 6.8 to 7.2.
+///
+/// The same cache for closest hits (a hit on the last hit triangle shrinks the rays'
+/// intervals before traversal) was tried on camera rays and did not pay: CBbunny 56.2 with
+/// against 57.2 without, beetle 76.0 against 76.1, dragon 32.3 against 32.4 Mrays/s.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct OccluderCache {
     tri: Option<[crate::math::Vec3; 3]>,
