@@ -15,7 +15,12 @@
 //! * When `threshold` or fewer rays still want a subtree, each finishes it alone with the
 //!   single-ray kernel ([`crate::bvh::traverse1`]), so incoherent packets degrade to single
 //!   rays instead of dragging empty lanes along.
-//! * Leaves test all wanted rays against one broadcast triangle at a time.
+//! * Leaves test all wanted rays against one broadcast triangle at a time, skipping the
+//!   triangles whose bounding boxes the frustum misses (8 boxes per test, built from the
+//!   block's `v0`, `e1`, `e2` and padded like node boxes). On camera rays (1 thread, best of
+//!   9, Mrays/s) this took the CS184 CBbunny from 57 to 81 (its Cornell-box walls share one
+//!   13-triangle leaf whose box is the whole room), the beetle from 76 to 86, the dragon from
+//!   32 to 37; on shadow rays in stateless 16-ray packets the CBbunny from 71 to 133.
 //!
 //! Every lane gets exactly the hit the single-ray kernel gives it: the box tests are
 //! conservative and the triangle test is the same bit-exact Möller–Trumbore.
@@ -222,7 +227,7 @@ impl<V: Lanes> PacketRays<V> {
     /// closest hits: ray by ray (each against a whole block) when fewer rays than triangles
     /// are active, triangle by triangle (all rays against one) otherwise.
     #[inline(always)]
-    fn intersect_leaf_bits<T: TriBlock>(&mut self, bvh: &Bvh8<T>, leaf: NodeRef, active: u32) {
+    fn intersect_leaf_bits<T: TriBlock>(&mut self, bvh: &Bvh8<T>, leaf: NodeRef, active: u32, fr: Option<&Frustum>) {
         if leaf.kind() == LeafKind::Spheres {
             self.intersect_spheres(bvh, leaf, V::from_bitmask(active));
             return;
@@ -231,8 +236,14 @@ impl<V: Lanes> PacketRays<V> {
         let act = V::from_bitmask(active);
         for (k, block) in bvh.tris[range].iter().enumerate() {
             let lanes = leaf.lanes_of_block(k, T::M);
-            count!(PACKET_TRI_TESTS, lanes);
-            for lane in 0..lanes {
+            let mut todo = (1u32 << lanes) - 1;
+            if TRIANGLE_CULL && lanes >= 4 {
+                if let Some(f) = fr {
+                    todo &= f.intersect_triangles(block);
+                }
+            }
+            count!(PACKET_TRI_TESTS, todo.count_ones());
+            for lane in crate::simd::bits(todo) {
                 let [v0, e1, e2] = block.lane_edges(lane);
                 let (m, t, u, v) = moller_trumbore(
                     &self.org,
@@ -262,6 +273,7 @@ impl<V: Lanes> PacketRays<V> {
         leaf: NodeRef,
         active: u32,
         cache: &mut OccluderCache,
+        fr: Option<&Frustum>,
     ) -> u32 {
         let mut occ = 0u32;
         let range = leaf.first_block()..leaf.first_block() + leaf.block_count();
@@ -269,8 +281,14 @@ impl<V: Lanes> PacketRays<V> {
             LeafKind::Triangles => {
                 for (k, block) in bvh.tris[range].iter().enumerate() {
                     let lanes = leaf.lanes_of_block(k, T::M);
-                    count!(PACKET_TRI_TESTS, lanes);
-                    for lane in 0..lanes {
+                    let mut todo = (1u32 << lanes) - 1;
+                    if TRIANGLE_CULL && lanes >= 4 {
+                        if let Some(f) = fr {
+                            todo &= f.intersect_triangles(block);
+                        }
+                    }
+                    count!(PACKET_TRI_TESTS, todo.count_ones());
+                    for lane in crate::simd::bits(todo) {
                         let [v0, e1, e2] = block.lane_edges(lane);
                         let (m, ..) = moller_trumbore(
                             &self.org,
@@ -345,7 +363,7 @@ pub fn intersect_hybrid<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, rays: &mut PacketR
                 break 'descend;
             }
             if cur.is_leaf() {
-                rays.intersect_leaf_bits(bvh, cur, active);
+                rays.intersect_leaf_bits(bvh, cur, active, frustum.as_ref());
                 break 'descend;
             }
             let node = &bvh.nodes[cur.node_index()];
@@ -445,6 +463,9 @@ pub struct OccluderCache {
     tri: Option<[crate::math::Vec3; 3]>,
 }
 
+/// Packet leaves: skip triangles whose (padded) boxes the frustum misses.
+const TRIANGLE_CULL: bool = true;
+
 /// Test a node's leaf children before descending into its inner children (any hit only).
 const LEAVES_FIRST: bool = true;
 
@@ -500,7 +521,7 @@ pub fn occluded_hybrid<V: Lanes, T: TriBlock>(
                 break 'descend;
             }
             if cur.is_leaf() {
-                occluded |= rays.occluded_leaf_bits(bvh, cur, active, cache);
+                occluded |= rays.occluded_leaf_bits(bvh, cur, active, cache, frustum.as_ref());
                 break 'descend;
             }
             let node = &bvh.nodes[cur.node_index()];
@@ -540,7 +561,7 @@ pub fn occluded_hybrid<V: Lanes, T: TriBlock>(
             for i in crate::simd::bits(leaves) {
                 let m = leaf_masks[i] & !occluded;
                 if m != 0 {
-                    occluded |= rays.occluded_leaf_bits(bvh, node.children[i], m, cache);
+                    occluded |= rays.occluded_leaf_bits(bvh, node.children[i], m, cache, frustum.as_ref());
                     if all & !occluded == 0 {
                         return occluded;
                     }
@@ -586,6 +607,10 @@ pub struct Frustum {
     tnear: F32x8,
     /// Largest `tfar` of the tile's active rays.
     pub tfar: f32,
+    /// The same bounds as scalars `[near_org, far_org, near_rdir, far_rdir]` per axis, and
+    /// `tnear`, for tests at other widths.
+    scalars: [[f32; 3]; 4],
+    tnear1: f32,
 }
 
 impl Frustum {
@@ -653,7 +678,44 @@ impl Frustum {
             far_rdir: v(far_rdir),
             tnear: F32x8::splat(tn),
             tfar: tf,
+            scalars: [near_org, far_org, near_rdir, far_rdir],
+            tnear1: tn,
         })
+    }
+
+    /// Could any ray of the tile hit the triangles of `block`? Bit `i` is set when lane `i`'s
+    /// bounding box, grown by 2^-20 of its largest coordinate magnitude (the rounding of
+    /// `v0 + e1` and `v0 + e2` is far smaller), passes the same interval test as
+    /// [`Frustum::intersect_node`].
+    #[inline(always)]
+    pub fn intersect_triangles<B: TriBlock>(&self, block: &B) -> u32 {
+        let (v0, e1, e2) = (block.v0(), block.e1(), block.e2());
+        let axis = |a: &B::V, b: &B::V, c: &B::V| {
+            let (p1, p2) = (*a + *b, *a + *c);
+            let lo = a.vmin(p1).vmin(p2);
+            let hi = a.vmax(p1).vmax(p2);
+            (lo, hi)
+        };
+        let (lx, hx) = axis(&v0.x, &e1.x, &e2.x);
+        let (ly, hy) = axis(&v0.y, &e1.y, &e2.y);
+        let (lz, hz) = axis(&v0.z, &e1.z, &e2.z);
+        let abs = |x: B::V| x & !B::V::splat(-0.0);
+        let mag = abs(lx).vmax(abs(hx)).vmax(abs(ly).vmax(abs(hy))).vmax(abs(lz).vmax(abs(hz)));
+        let pad = mag * B::V::splat(1.0 / (1 << 20) as f32) + B::V::splat(f32::MIN_POSITIVE);
+        let (lx, ly, lz) = (lx - pad, ly - pad, lz - pad);
+        let (hx, hy, hz) = (hx + pad, hy + pad, hz + pad);
+        let [no, fo, nr, fr] = self.scalars;
+        let sp = B::V::splat;
+        let near = |a: usize, lo: B::V, hi: B::V| if self.near[a] & 1 == 0 { (lo, hi) } else { (hi, lo) };
+        let (nx, fx) = near(0, lx, hx);
+        let (ny, fy) = near(1, ly, hy);
+        let (nz, fz) = near(2, lz, hz);
+        let tn = ((nx - sp(no[0])) * sp(nr[0]))
+            .vmax((ny - sp(no[1])) * sp(nr[1]))
+            .vmax(((nz - sp(no[2])) * sp(nr[2])).vmax(sp(self.tnear1)));
+        let tf = ((fx - sp(fo[0])) * sp(fr[0])).vmin((fy - sp(fo[1])) * sp(fr[1])).vmin((fz - sp(fo[2])) * sp(fr[2]));
+        let tf = (tf * sp(SLAB_WIDEN)).vmin(sp(self.tfar));
+        tn.le(tf).bitmask()
     }
 
     /// Could any ray of the tile hit the children of `n` before `self.tfar`? Returns the mask
