@@ -267,31 +267,27 @@ mod reduce {
         }
     }
 
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx512f"))]
+    /// 16 lanes: the two halves through 8-lane registers (LLVM turns the array split into
+    /// one `vextractf64x4`; the AVX-512 intrinsics need a newer Rust than this crate's MSRV).
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
     impl Reduce for f32x16 {
         #[inline(always)]
         fn min(self) -> f32 {
-            use std::arch::x86_64::*;
-            let v: __m512 = self.into();
-            // SAFETY: compiled only when the target has AVX-512F (the cfg above); register-only
-            // operations.
-            x86::min8(unsafe {
-                let h = _mm512_castps512_ps256(v);
-                let l = _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(v)));
-                _mm256_min_ps(h, l)
-            })
+            let (lo, hi) = halves(self);
+            Reduce::min(lo.fast_min(hi))
         }
         #[inline(always)]
         fn max(self) -> f32 {
-            use std::arch::x86_64::*;
-            let v: __m512 = self.into();
-            // SAFETY: as in `min`.
-            x86::max8(unsafe {
-                let h = _mm512_castps512_ps256(v);
-                let l = _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(_mm512_castps_pd(v)));
-                _mm256_max_ps(h, l)
-            })
+            let (lo, hi) = halves(self);
+            Reduce::max(lo.fast_max(hi))
         }
+    }
+
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
+    #[inline(always)]
+    fn halves(v: f32x16) -> (f32x8, f32x8) {
+        let a = v.to_array();
+        (f32x8::new(a[..8].try_into().expect("8 lanes")), f32x8::new(a[8..].try_into().expect("8 lanes")))
     }
 
     #[allow(unused_macros)]
@@ -313,7 +309,7 @@ mod reduce {
     portable!(f32x4, 4);
     #[cfg(not(all(target_arch = "x86_64", target_feature = "avx")))]
     portable!(f32x8, 8);
-    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx512f")))]
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx")))]
     portable!(f32x16, 16);
 }
 
@@ -339,12 +335,6 @@ impl<V: Lanes> Vec3x<V> {
         Self { x: V::splat(v.x), y: V::splat(v.y), z: V::splat(v.z) }
     }
 
-    /// Lane-wise difference.
-    #[inline(always)]
-    pub fn sub(self, o: Self) -> Self {
-        Self { x: self.x - o.x, y: self.y - o.y, z: self.z - o.z }
-    }
-
     /// Lane-wise cross product, with the operation order of `glam::Vec3::cross` so that
     /// each lane is bit-identical to the scalar result.
     #[inline(always)]
@@ -362,6 +352,15 @@ impl<V: Lanes> Vec3x<V> {
     #[inline(always)]
     pub fn lane(self, i: usize) -> crate::math::Vec3 {
         crate::math::Vec3::new(self.x.lane(i), self.y.lane(i), self.z.lane(i))
+    }
+}
+
+impl<V: Lanes> Sub for Vec3x<V> {
+    type Output = Self;
+    /// Lane-wise difference.
+    #[inline(always)]
+    fn sub(self, o: Self) -> Self {
+        Self { x: self.x - o.x, y: self.y - o.y, z: self.z - o.z }
     }
 }
 

@@ -22,7 +22,7 @@ pub fn sphere_lanes<V: Lanes>(
     center: &Vec3x<V>,
     radius: V,
 ) -> (V, V) {
-    let f = origin.sub(*center);
+    let f = *origin - *center;
     let a = dir.dot(*dir);
     let half_b = f.dot(*dir);
     let s = half_b / a;

@@ -49,7 +49,7 @@ pub fn moller_trumbore<V: Lanes>(
     let p = dir.cross(*e2);
     let det = e1.dot(p);
     let det_ok = !det.eq(zero) & det.is_finite();
-    let s = origin.sub(*v0);
+    let s = *origin - *v0;
     let uu = s.dot(p);
     let q = s.cross(*e1);
     let vv = dir.dot(q);
