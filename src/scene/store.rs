@@ -211,7 +211,9 @@ impl Scene {
             let s = p - nt;
             let center = self.spheres.center[s];
             let t = intersect_sphere(ray.origin, ray.dir, ray.tnear, tfar, center, self.spheres.radius[s])?;
-            let (u, v) = sphere_uv((ray.at(t) - center).normalize());
+            // `normalize_or`, as in `surface`: a hit point that rounds onto the centre (huge
+            // coordinates, tiny radius) has no direction (found by fuzzing).
+            let (u, v) = sphere_uv((ray.at(t) - center).normalize_or(Vec3::Z));
             Some((t, u, v))
         }
     }
