@@ -313,17 +313,11 @@ pub fn slack() -> f32 {
     *SLACK.get_or_init(|| if std::env::var_os("RAYPACK_FUZZ_EXACT").is_some_and(|v| v == "1") { 0.0 } else { 4e-6 })
 }
 
-/// `a` and `b` agree within [`slack`] relative to the larger, or within `1e-30` (products of
-/// coordinates below `1e-19` are denormal, and denormals lose precision).
-fn close(a: f32, b: f32) -> bool {
-    a == b || (a - b).abs() <= slack() * a.abs().max(b.abs()) + if slack() > 0.0 { 1e-30 } else { 0.0 }
-}
-
 /// The traversal oracle for one ray: the public kernels (`intersect1`, `occluded1`) and the
-/// reference BVH2 traversal answer what testing every primitive answers (within [`slack`]);
-/// `intersect1` and the reference report the same `t` bits when they report the same
-/// primitive (kernel twins agree); a hit lies in `(tnear, tfar]` with finite `t`, `u`, `v`;
-/// invalid rays miss.
+/// reference BVH2 traversal answer what testing every primitive answers (within a [`slack`]
+/// tolerance); `intersect1` and the reference report the same `t` bits when they report the
+/// same primitive (kernel twins agree); a hit lies in `(tnear, tfar]` with finite `t`, `u`,
+/// `v`; invalid rays miss.
 pub fn check_ray(scene: &Scene, ray: &Ray) {
     let got = scene.intersect1(ray);
     let reference = scene.intersect1_reference(ray);
@@ -336,18 +330,6 @@ pub fn check_ray(scene: &Scene, ray: &Ray) {
     }
     if got.prim == reference.prim && got.is_hit() {
         assert_eq!(got.t.to_bits(), reference.t.to_bits(), "intersect1 vs reference, same prim: {ray:?}");
-    }
-    let conditioned = [&brute, &reference, &got].iter().all(|h| in_own_box(scene, ray, h));
-    if conditioned {
-        agrees(scene, ray, &reference, &brute, "reference BVH2 vs brute force");
-        agrees(scene, ray, &got, &brute, "intersect1 vs brute force");
-    }
-    // The hit that decides an any-hit query is the closest one; at the interval's ends the
-    // traversal may cull within the slack.
-    let edge = brute.is_hit() && (close(brute.t, ray.tfar) || close(brute.t, ray.tnear));
-    if conditioned && !edge {
-        assert_eq!(occluded_reference, brute.is_hit(), "occluded1_reference vs brute force: {ray:?} {brute:?}");
-        assert_eq!(occluded, brute.is_hit(), "occluded1 vs brute force: {ray:?} {brute:?}");
     }
     for hit in [&got, &reference] {
         if hit.is_hit() {
@@ -365,18 +347,63 @@ pub fn check_ray(scene: &Scene, ray: &Ray) {
             );
         }
     }
-    if got.is_hit() && conditioned && !close(got.t, ray.tnear) {
+    if ![&brute, &reference, &got].iter().all(|h| in_own_box(scene, ray, h)) {
+        return;
+    }
+    let tol = Tolerance::of(scene, ray);
+    agrees(scene, ray, &tol, &reference, &brute, "reference BVH2 vs brute force");
+    agrees(scene, ray, &tol, &got, &brute, "intersect1 vs brute force");
+    // The hit that decides an any-hit query is the closest one; at the interval's ends the
+    // traversal may cull within the tolerance.
+    if !(brute.is_hit() && tol.near_end(ray, brute.t)) {
+        assert_eq!(occluded_reference, brute.is_hit(), "occluded1_reference vs brute force: {ray:?} {brute:?}");
+        assert_eq!(occluded, brute.is_hit(), "occluded1 vs brute force: {ray:?} {brute:?}");
+    }
+    if got.is_hit() && got.t.is_finite() && !tol.close(got.t, ray.tnear) {
         // A ray stopping just past the closest hit is blocked; one stopping just short of it
         // is blocked exactly when brute force finds something there.
-        let past = Ray { tfar: got.t * (1.0 + 2.0 * slack()), ..*ray };
+        let past = Ray { tfar: got.t + 2.0 * tol.at(got.t), ..*ray };
         assert!(scene.occluded1(&past), "hit at t = {} but not occluded over (tnear, t]: {ray:?}", got.t);
-        let short = Ray { tfar: got.t * (1.0 - 4.0 * slack()), ..*ray };
+        let short = Ray { tfar: got.t - 2.0 * tol.at(got.t), ..*ray };
         if short.is_valid() {
             let b = scene.intersect1_brute_force(&short);
-            if !(b.is_hit() && (close(b.t, short.tfar) || close(b.t, short.tnear))) {
+            if !(b.is_hit() && tol.near_end(&short, b.t)) {
                 assert_eq!(scene.occluded1(&short), b.is_hit(), "short ray {short:?}: brute {b:?}");
             }
         }
+    }
+}
+
+/// How far apart two `t` of one ray may be and still count as the same: [`slack`] relative
+/// to `t`, plus the slack relative to the coordinates' magnitude divided by `|dir|` (a
+/// primitive test's `t` is only as precise as the coordinates it subtracts), plus `1e-30`
+/// (products of coordinates below `1e-19` are denormal).
+struct Tolerance {
+    /// The coordinate term, in units of `t`.
+    base: f32,
+}
+
+impl Tolerance {
+    fn of(scene: &Scene, ray: &Ray) -> Self {
+        let m = |v: Vec3| v.abs().max_element();
+        let b = scene.bounds();
+        let geometry = if b.is_valid() { m(b.min).max(m(b.max)) } else { 0.0 };
+        let scale = m(ray.origin).max(geometry);
+        // Matches `in_own_box`'s tolerance on points, which is `4 slack` relative.
+        let base = if slack() > 0.0 { 8.0 * slack() * scale / m(ray.dir) + 1e-30 } else { 0.0 };
+        Tolerance { base }
+    }
+
+    fn at(&self, t: f32) -> f32 {
+        slack() * t.abs() + self.base
+    }
+
+    fn close(&self, a: f32, b: f32) -> bool {
+        a == b || (a - b).abs() <= self.at(a.abs().max(b.abs()))
+    }
+
+    fn near_end(&self, ray: &Ray, t: f32) -> bool {
+        self.close(t, ray.tnear) || self.close(t, ray.tfar)
     }
 }
 
@@ -416,7 +443,9 @@ fn in_own_box(scene: &Scene, ray: &Ray, hit: &Hit) -> bool {
         let (o, d) = (ray.origin[k] as f64, ray.dir[k] as f64);
         let p = o + d * t;
         let (lo, hi) = (b.min[k] as f64, b.max[k] as f64);
-        let tol = 4.0 * slack() as f64 * lo.abs().max(hi.abs()).max(p.abs()) + 1e-30;
+        // Relative to the point and the origin, not to the box: the box is exact (the
+        // vertices' min and max), only the test's `t` is rounded.
+        let tol = 4.0 * slack() as f64 * o.abs().max(p.abs()) + 1e-30;
         // Slab tests take `1 / d` as `±1e18` for `|d| < 1e-18` (`math::safe_recip`, as
         // Embree's `rcp_safe`): then the slab is only seen as reaching `t` when the origin lies
         // at least `1e-18 t` inside it.
@@ -426,15 +455,20 @@ fn in_own_box(scene: &Scene, ray: &Ray, hit: &Hit) -> bool {
 }
 
 /// `got` answers what brute force (`want`) answers, allowing the traversal to miss a hit
-/// within [`slack`] of `tnear` or `tfar` and to find a hit within the slack of the closest.
-fn agrees(scene: &Scene, ray: &Ray, got: &Hit, want: &Hit, what: &str) {
-    let near_end = |t: f32| close(t, ray.tnear) || close(t, ray.tfar);
+/// within the tolerance of `tnear` or `tfar` and to find one within it of the closest.
+fn agrees(scene: &Scene, ray: &Ray, tol: &Tolerance, got: &Hit, want: &Hit, what: &str) {
     match (got.is_hit(), want.is_hit()) {
         (false, false) => {}
         (true, false) => panic!("{what}: {ray:?}: phantom hit {got:?}"),
-        (false, true) => assert!(near_end(want.t), "{what}: {ray:?}: missed {want:?}"),
+        (false, true) => assert!(tol.near_end(ray, want.t), "{what}: {ray:?}: missed {want:?}"),
         (true, true) => {
-            assert!(close(got.t, want.t), "{what}: {ray:?}: t {} vs {} ({got:?} vs {want:?})", got.t, want.t);
+            // Either the same distance, or the closest hit sat at `tnear` and was culled.
+            assert!(
+                tol.close(got.t, want.t) || tol.close(want.t, ray.tnear),
+                "{what}: {ray:?}: t {} vs {} ({got:?} vs {want:?})",
+                got.t,
+                want.t
+            );
             // The reported primitive is really hit there.
             let again = scene.intersect_prim(got.prim, ray, ray.tfar);
             assert!(
