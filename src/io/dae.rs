@@ -87,8 +87,17 @@ pub struct DaeOptions {
 }
 
 /// Deepest node nesting (including `instance_node` indirections) accepted: deeper files are
-/// rejected instead of overflowing the stack (and `instance_node` cycles end here too).
+/// rejected instead of overflowing the stack.
 pub const MAX_NODE_DEPTH: usize = 256;
+
+/// What instancing may expand a document to, in node visits plus instanced vertices,
+/// triangles and spheres: `max(MIN_INSTANCING_BUDGET, INSTANCING_BUDGET_PER_BYTE × file size)`.
+/// `instance_node` and `instance_geometry` multiply: 30 nested nodes that each instance the
+/// next twice are 2³⁰ copies from a 2 kB file. Without a cap such a file takes hours and all
+/// memory; with it, an error names the element where the budget ran out.
+pub const INSTANCING_BUDGET_PER_BYTE: usize = 64;
+/// The smallest instancing budget (see [`INSTANCING_BUDGET_PER_BYTE`]).
+pub const MIN_INSTANCING_BUDGET: usize = 1 << 20;
 
 /// Parses a COLLADA document. `path` only names the file in errors. Returns the scene and
 /// warnings about what was skipped.
@@ -120,6 +129,9 @@ pub fn parse_dae(text: &str, path: &Path, opts: &DaeOptions) -> Result<(SceneBui
         default_material: None,
         meshes: HashMap::new(),
         camera: None,
+        visiting: Vec::new(),
+        budget: instancing_budget(text.len()),
+        file_len: text.len(),
     };
 
     let up = cx.up_axis(root)?;
@@ -224,6 +236,17 @@ struct Ctx<'a, 'input> {
     /// Parsed meshes by `<geometry id>` (geometries instanced twice are parsed once).
     meshes: HashMap<roxmltree::NodeId, Rc<ParsedMesh>>,
     camera: Option<CameraInfo>,
+    /// The nodes being visited, outermost first: an `instance_node` of one of them is a cycle.
+    visiting: Vec<roxmltree::NodeId>,
+    /// What instancing may still add (see [`INSTANCING_BUDGET_PER_BYTE`]).
+    budget: usize,
+    /// The document's length in bytes.
+    file_len: usize,
+}
+
+/// The instancing budget of a document of `len` bytes (see [`INSTANCING_BUDGET_PER_BYTE`]).
+pub fn instancing_budget(len: usize) -> usize {
+    MIN_INSTANCING_BUDGET.max(INSTANCING_BUDGET_PER_BYTE.saturating_mul(len))
 }
 
 fn children<'a, 'i>(n: Node<'a, 'i>, tag: &'static str) -> impl Iterator<Item = Node<'a, 'i>> {
@@ -424,22 +447,50 @@ impl<'a, 'i> Ctx<'a, 'i> {
         Ok(m)
     }
 
+    /// Takes `amount` from the instancing budget, or fails naming `at`.
+    fn charge(&mut self, at: Node, amount: usize) -> Result<(), LoadError> {
+        match self.budget.checked_sub(amount) {
+            Some(rest) => {
+                self.budget = rest;
+                Ok(())
+            }
+            None => Err(self.err(
+                at,
+                format!(
+                    "instancing expands the scene past {} node visits, vertices, triangles and spheres (the cap for \
+                     a file of {} bytes: {INSTANCING_BUDGET_PER_BYTE} per byte, at least {MIN_INSTANCING_BUDGET})",
+                    instancing_budget(self.file_len),
+                    self.file_len
+                ),
+            )),
+        }
+    }
+
     fn visit_node(&mut self, node: Node<'a, 'i>, parent: Mat4, depth: usize) -> Result<(), LoadError> {
         if depth > MAX_NODE_DEPTH {
-            return Err(self.err(node, format!("nodes nested deeper than {MAX_NODE_DEPTH} (an instance_node cycle?)")));
+            return Err(self.err(node, format!("nodes nested deeper than {MAX_NODE_DEPTH}")));
         }
+        self.charge(node, 1)?;
         let world = parent * self.local_transform(node)?;
+        self.visiting.push(node.id());
         // Children first, then this node's own instances: CS184's order.
         for c in element_children(node) {
             match c.tag_name().name() {
                 "node" => self.visit_node(c, world, depth + 1)?,
                 "instance_node" => {
                     let target = self.resolve(c, "url", "node")?;
+                    if self.visiting.contains(&target.id()) {
+                        let url = c.attribute("url").unwrap_or("");
+                        return Err(
+                            self.err(c, format!("instance_node cycle: {url} is this node or one containing it"))
+                        );
+                    }
                     self.visit_node(target, world, depth + 1)?;
                 }
                 _ => {}
             }
         }
+        self.visiting.pop();
         for c in element_children(node) {
             match c.tag_name().name() {
                 "instance_geometry" => self.instance_geometry(c, &world)?,
@@ -475,6 +526,8 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     p
                 }
             };
+            let size = parsed.positions.len() + parsed.groups.iter().map(|(_, t)| t.len()).sum::<usize>();
+            self.charge(ig, size)?;
             let positions: Vec<Vec3> = parsed.positions.iter().map(|&p| project(world, p)).collect();
             let all: Vec<[u32; 3]> = parsed.groups.iter().flat_map(|(_, t)| t.iter().copied()).collect();
             let normals = vertex_normals(&positions, &all);
@@ -497,6 +550,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
         let radius = cmu_technique(geom).and_then(|t| child(t, "sphere")).map(|s| self.required(s, "radius"));
         match radius {
             Some(r) => {
+                self.charge(ig, 1)?;
                 let radius = self.number(r?)?;
                 let center = project(world, Vec3::ZERO);
                 let scale = (*world * Vec4::X).truncate().length();
@@ -576,8 +630,11 @@ impl<'a, 'i> Ctx<'a, 'i> {
         };
         let stride = attr("stride", width)?;
         let offset = attr("offset", 0)?;
-        let available =
-            if data.len() >= offset + width && stride > 0 { (data.len() - offset - width) / stride + 1 } else { 0 };
+        // Checked: offset and stride come from the file (usize::MAX must not wrap around).
+        let available = match data.len().checked_sub(offset).and_then(|n| n.checked_sub(width)) {
+            Some(rest) if stride > 0 => rest / stride + 1,
+            _ => 0,
+        };
         let count = attr("count", available)?;
         if stride < width {
             return Err(self.err(accessor.unwrap_or(source), format!("stride {stride} is below {width}")));
@@ -588,7 +645,8 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 format!("{count} elements of stride {stride} need more than the {} values in the array", data.len()),
             ));
         }
-        data.drain(..offset);
+        // (`count = 0` passes with any offset.)
+        data.drain(..offset.min(data.len()));
         Ok((data, stride, count))
     }
 

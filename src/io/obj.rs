@@ -21,21 +21,30 @@ pub fn parse_obj(
     check_faces(bytes, path)?;
     let opts = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     let mut warnings = Vec::new();
-    let missing_mtl = std::cell::RefCell::new(Vec::new());
+    let mtl_notes = std::cell::RefCell::new(Vec::new());
     let mut reader = std::io::Cursor::new(bytes);
     let result = tobj::load_obj_buf(&mut reader, &opts, |mtl_path| match read_mtl(mtl_path) {
-        Some(data) => tobj::load_mtl_buf(&mut std::io::Cursor::new(data)),
+        Some(data) => match check_mtl(&data) {
+            Ok(()) => tobj::load_mtl_buf(&mut std::io::Cursor::new(data)),
+            Err(problem) => {
+                mtl_notes.borrow_mut().push(format!("material library {}: {problem}", mtl_path.display()));
+                Err(tobj::LoadError::MaterialParseError)
+            }
+        },
         None => {
-            missing_mtl.borrow_mut().push(mtl_path.display().to_string());
+            mtl_notes.borrow_mut().push(format!("material library {} not found", mtl_path.display()));
             Err(tobj::LoadError::OpenFileFailed)
         }
     });
     let (models, materials) = result.map_err(|e| locate_error(bytes, path, e))?;
-    for m in missing_mtl.into_inner() {
-        warnings.push(format!("material library {m} not found; using the default material"));
+    let mtl_notes = mtl_notes.into_inner();
+    for m in &mtl_notes {
+        warnings.push(format!("{m}; using the default material"));
     }
     let materials = materials.unwrap_or_else(|e| {
-        warnings.push(format!("material library unreadable ({e}); using the default material"));
+        if mtl_notes.is_empty() {
+            warnings.push(format!("material library unreadable ({e}); using the default material"));
+        }
         Vec::new()
     });
 
@@ -67,6 +76,23 @@ pub fn parse_obj(
             .map_err(|e| LoadError::parse(path, format!("object {:?}", model.name), e.to_string()))?;
     }
     Ok((b, warnings))
+}
+
+/// Finds what `tobj` cannot take in an MTL library: a colour statement (`Ka`, `Kd`, `Ks`,
+/// `Ke`) with fewer than three values makes `tobj` 4.0.5 panic (`parse_float3` unwraps;
+/// found by fuzzing). Returns the first such line and what is wrong with it.
+fn check_mtl(bytes: &[u8]) -> Result<(), String> {
+    for (i, line) in bytes.split(|&b| b == b'\n').enumerate() {
+        let text = String::from_utf8_lossy(line);
+        let mut words = text.split_whitespace();
+        if let Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")) = words.next() {
+            let n = words.count();
+            if n < 3 {
+                return Err(format!("line {}: {key} needs 3 values, found {n}", i + 1));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Rejects `f` statements with fewer than three corners, which `tobj` silently reads as points
