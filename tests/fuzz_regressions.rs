@@ -191,10 +191,31 @@ fn obj_enormous_polygon_and_huge_indices() {
     text += "\n";
     let (b, _) = load(text.as_bytes(), "big.obj").unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(b.num_triangles(), n - 2);
-    for index in ["4", "99999999999999999999999", "-4"] {
+    for index in ["4", "99999999999999999999999", "-4", "0"] {
         let text = format!("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 {index}\n");
         expect_error(text.as_bytes(), "index.obj", "line 4");
     }
+}
+
+#[test]
+fn obj_relative_and_zero_texture_and_normal_indices_are_errors_not_overflows() {
+    // Found by fuzzing: tobj 4.0.5 makes `-9` with 3 texture coordinates into 2^64 - 6 and
+    // multiplies it by 2 unchecked (a panic with overflow checks on, garbage without).
+    let base = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvn 0 0 1\n";
+    for (face, what) in [
+        ("f 1/-9 2/1 3/1", "texture coordinate index -9 out of range: the file has 3 before this line"),
+        ("f 1/0 2/1 3/1", "texture coordinate index 0 out of range"),
+        ("f 1//-2 2//1 3//1", "normal index -2 out of range: the file has 1 before this line"),
+        ("f 1/1/9223372036854775807 2/1/1 3/1/1", "normal index 9223372036854775807 out of range: the file has 1"),
+        ("l 1 -5", "vertex index -5 out of range"),
+    ] {
+        let text = format!("{base}{face}\n");
+        let e = expect_error(text.as_bytes(), "rel.obj", "line 8");
+        assert!(e.contains(what), "{face}: {e}");
+    }
+    // In range, relative indices load.
+    let (b, _) = load(format!("{base}f -3/-3/-1 -2/-2/-1 -1/-1/-1\n").as_bytes(), "ok.obj").unwrap();
+    assert_eq!(b.num_triangles(), 1);
 }
 
 // ----- PLY ----------------------------------------------------------------------------------

@@ -95,19 +95,60 @@ fn check_mtl(bytes: &[u8]) -> Result<(), String> {
     Ok(())
 }
 
-/// Rejects `f` statements with fewer than three corners, which `tobj` silently reads as points
-/// or lines: in OBJ they are malformed, and typically the last line of a truncated file.
+/// Checks every `f` and `l` statement before `tobj` sees it: a face needs at least three
+/// corners (`tobj` silently reads shorter ones as points or lines: in OBJ they are malformed,
+/// and typically the last line of a truncated file), and every index must name an element that
+/// exists: `0`, one past the file's count, or a relative (negative) one reaching before the
+/// first element is an error naming the line. `tobj` 4.0.5 turns such indices into `usize`
+/// values near `2⁶⁴` and multiplies them unchecked (a panic with overflow checks on; found by
+/// fuzzing).
 fn check_faces(bytes: &[u8], path: &Path) -> Result<(), LoadError> {
-    for (i, line) in bytes.split(|&b| b == b'\n').enumerate() {
-        if line.len() > 1 && line[0] == b'f' && line[1].is_ascii_whitespace() {
-            let corners = line[1..].split(|b| b.is_ascii_whitespace()).filter(|t| !t.is_empty()).count();
-            if corners < 3 {
-                return Err(LoadError::at_line(
-                    path,
-                    i + 1,
-                    format!("a face needs at least 3 corners, found {corners} (truncated file?)"),
-                ));
+    let lines = || bytes.split(|&b| b == b'\n').map(String::from_utf8_lossy);
+    let mut total = [0i64; 3];
+    for line in lines() {
+        match line.split_whitespace().next() {
+            Some("v") => total[0] += 1,
+            Some("vt") => total[1] += 1,
+            Some("vn") => total[2] += 1,
+            _ => {}
+        }
+    }
+    let mut seen = [0i64; 3];
+    for (i, line) in lines().enumerate() {
+        let mut words = line.split_whitespace();
+        let keyword = words.next();
+        match keyword {
+            Some("v") => seen[0] += 1,
+            Some("vt") => seen[1] += 1,
+            Some("vn") => seen[2] += 1,
+            Some("f") | Some("l") => {
+                let corners: Vec<&str> = words.collect();
+                if keyword == Some("f") && corners.len() < 3 {
+                    return Err(LoadError::at_line(
+                        path,
+                        i + 1,
+                        format!("a face needs at least 3 corners, found {} (truncated file?)", corners.len()),
+                    ));
+                }
+                for c in corners {
+                    for (k, part) in c.split('/').enumerate().take(3) {
+                        // Empty (`v//vn`) and malformed parts are tobj's to report.
+                        let Ok(index) = part.parse::<i64>() else { continue };
+                        let what = ["vertex", "texture coordinate", "normal"][k];
+                        let bad = if index > 0 { index > total[k] } else { index == 0 || -index > seen[k] };
+                        if bad {
+                            let have = if index < 0 { seen[k] } else { total[k] };
+                            let before = if index < 0 { " before this line" } else { "" };
+                            return Err(LoadError::at_line(
+                                path,
+                                i + 1,
+                                format!("{what} index {index} out of range: the file has {have}{before}"),
+                            ));
+                        }
+                    }
+                }
             }
+            _ => {}
         }
     }
     Ok(())
