@@ -271,3 +271,25 @@ fn sphere_hit_whose_point_rounds_onto_the_centre_has_finite_coordinates() {
     let reference = scene.intersect1_reference(&ray);
     assert!(reference.u.is_finite() && reference.v.is_finite(), "{reference:?}");
 }
+
+#[test]
+fn obj_material_library_that_is_a_device_or_fifo_is_not_read() {
+    // `mtllib /dev/zero` used to be read with `fs::read` until memory ran out, and a FIFO
+    // blocked the loader forever; now only regular files of at most 64 MiB are read.
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("pipe.mtl");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status().is_ok_and(|s| s.success());
+    let mut libraries = vec!["/dev/zero".to_string()];
+    if made {
+        libraries.push("pipe.mtl".to_string());
+    } else {
+        println!("mkfifo unavailable: the FIFO case is not checked");
+    }
+    for lib in libraries {
+        let obj = dir.path().join("dev.obj");
+        std::fs::write(&obj, format!("mtllib {lib}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")).unwrap();
+        let (b, warnings) = raypack::io::load_scene_with_warnings(&obj).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(b.num_triangles(), 1);
+        assert!(warnings.iter().any(|w| w.contains(&lib) && w.contains("not a regular file")), "{warnings:?}");
+    }
+}

@@ -62,8 +62,26 @@ pub fn load_scene_with_warnings(path: &Path) -> Result<(SceneBuilder, Vec<String
         SceneFormat::from_path(path).ok_or_else(|| LoadError::UnsupportedFormat { path: path.to_path_buf() })?;
     let bytes = std::fs::read(path).map_err(|source| LoadError::Io { path: path.to_path_buf(), source })?;
     let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
-    let read_mtl = move |p: &Path| std::fs::read(dir.join(p)).ok();
+    let read_mtl = move |p: &Path| read_material_library(&dir.join(p));
     load_with(&bytes, format, path, &read_mtl)
+}
+
+/// Material libraries larger than this are not read (real ones are kilobytes).
+pub const MAX_MTL_BYTES: u64 = 64 << 20;
+
+/// An OBJ's material library, if it is a regular file of at most [`MAX_MTL_BYTES`]: an OBJ
+/// naming `mtllib /dev/zero` or a FIFO must not make the loader read forever.
+fn read_material_library(path: &Path) -> Option<Vec<u8>> {
+    use std::io::Read;
+    // Checked before opening: opening a FIFO blocks until someone writes to it.
+    let meta = std::fs::metadata(path).ok()?;
+    if !meta.is_file() || meta.len() > MAX_MTL_BYTES {
+        return None;
+    }
+    let file = std::fs::File::open(path).ok()?;
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    file.take(MAX_MTL_BYTES).read_to_end(&mut bytes).ok()?;
+    Some(bytes)
 }
 
 /// Loads a scene held in memory (for tests and fuzzing). `name` only names it in errors;

@@ -32,7 +32,10 @@ pub fn parse_obj(
             }
         },
         None => {
-            mtl_notes.borrow_mut().push(format!("material library {} not found", mtl_path.display()));
+            mtl_notes.borrow_mut().push(format!(
+                "material library {} not found (or not a regular file of at most 64 MiB)",
+                mtl_path.display()
+            ));
             Err(tobj::LoadError::OpenFileFailed)
         }
     });
