@@ -58,7 +58,11 @@
 //! Robustness: a missing geometry, material, effect or source, a bad number or an index out of
 //! range is a [`LoadError`] naming the element (`<geometry id="Cube-mesh">/<mesh>/<polylist
 //! material="x">/<p>`); a reference to a missing light or camera (which CS184's own
-//! `sky/CBgems.dae` contains) and unsupported features are warnings.
+//! `sky/CBgems.dae` contains) and unsupported features are warnings. What a file can make the
+//! loader do is capped: node nesting at [`MAX_NODE_DEPTH`], `instance_node` cycles are errors,
+//! and instancing may expand a document to at most [`INSTANCING_BUDGET_PER_BYTE`] node visits
+//! and instanced primitives per byte; counts and offsets from attributes are checked against
+//! the data before anything is allocated (all pinned by `tests/fuzz_regressions.rs`).
 
 use crate::io::{LoadError, vertex_normals};
 use crate::math::{Mat3, Mat4, Vec3, Vec4};

@@ -5,6 +5,10 @@
 //!
 //! `tobj` reports what went wrong but not where; on an error this module scans the text once
 //! more to find the first line that shows the problem, so the error names the line.
+//!
+//! Before `tobj` sees a file, face and line indices are checked (`check_faces`) and MTL colour
+//! statements too (`check_mtl`): `tobj` 4.0.5 overflows on out-of-range relative indices and
+//! panics on `Kd` with fewer than three values (both found by fuzzing, `fuzz/`).
 
 use crate::io::{LoadError, vertex_normals};
 use crate::math::Vec3;
