@@ -183,7 +183,8 @@ impl Scene {
         let nt = self.triangles.len() as u32;
         if hit.prim != Hit::NONE && hit.prim >= nt {
             let center = self.spheres.center[(hit.prim - nt) as usize];
-            (hit.u, hit.v) = sphere_uv((ray.at(hit.t) - center).normalize());
+            // `normalize_or`: a hit point that rounds onto the centre has no direction.
+            (hit.u, hit.v) = sphere_uv((ray.at(hit.t) - center).normalize_or(Vec3::Z));
         }
     }
 
