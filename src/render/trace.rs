@@ -19,13 +19,17 @@ impl<'a> Tracer<'a> {
         Self { scene, brute_force }
     }
 
-    /// Closest hits of a batch of (coherent) camera rays: `hits[i]` for `rays[i]`.
-    ///
-    /// Today a loop over single-ray queries; the place for the packet kernels.
+    /// Closest hits of a batch of (coherent) camera rays: `hits[i]` for `rays[i]`, on the
+    /// calling thread, as 16-ray packets through the hybrid packet kernel ([`Scene::intersect_batch`]:
+    /// a frustum prefilter for coherent packets, single rays for subtrees few lanes want).
     pub fn closest_batch(&self, rays: &[Ray], hits: &mut [Hit]) {
         debug_assert_eq!(rays.len(), hits.len());
-        for (r, h) in rays.iter().zip(hits.iter_mut()) {
-            *h = self.closest(r);
+        if self.brute_force {
+            for (r, h) in rays.iter().zip(hits.iter_mut()) {
+                *h = self.closest(r);
+            }
+        } else {
+            self.scene.intersect_batch(rays, hits);
         }
     }
 
