@@ -342,6 +342,17 @@ fn median(mut xs: Vec<Duration>) -> Duration {
     xs[xs.len() / 2]
 }
 
+/// Shortest timed run: a run traces its ray set as many times as it takes to last about this
+/// long, so that a fast method on a small set measures tracing, not the few microseconds of
+/// starting rayon's threads (the CS184 CBbunny shadow set is traced in about 1 ms).
+const MIN_RUN: Duration = Duration::from_millis(50);
+
+/// Times a run repeats its ray set, from the warm-up's duration (at least 1, at most 1000).
+fn repetitions(warm_up: Duration) -> usize {
+    let one = warm_up.as_secs_f64().max(1e-7);
+    ((MIN_RUN.as_secs_f64() / one).ceil() as usize).clamp(1, 1000)
+}
+
 /// Times every method on every ray set at every thread count. `scene` was built by the
 /// caller in `raypack_build` (timed there); `log` receives progress lines.
 pub fn run_bench(
@@ -422,15 +433,20 @@ pub fn run_bench(
                 .map_err(|e| BenchError::Settings(e.to_string()))?;
             for m in methods.iter().filter(|m| m.run.is_occlusion() == occlusion) {
                 let mut out = output_for(&m.run, set.rays.len());
-                let times = pool.install(|| {
+                let (reps, times) = pool.install(|| {
+                    let t0 = Instant::now();
                     trace(&m.run, &set.rays, &mut out); // warm-up
-                    (0..settings.runs)
+                    let reps = repetitions(t0.elapsed());
+                    let times = (0..settings.runs)
                         .map(|_| {
                             let t0 = Instant::now();
-                            trace(&m.run, &set.rays, &mut out);
+                            for _ in 0..reps {
+                                trace(&m.run, &set.rays, &mut out);
+                            }
                             t0.elapsed()
                         })
-                        .collect::<Vec<_>>()
+                        .collect::<Vec<_>>();
+                    (reps, times)
                 });
                 let checksum = out.checksum(&set.rays);
                 let allowed = (set.rays.len() as f64 * 1e-5).max(0.0);
@@ -442,7 +458,7 @@ pub fn run_bench(
                     tracer: m.tracer,
                     method: m.name.clone(),
                     threads,
-                    mrays_per_s: set.rays.len() as f64 / med / 1e6,
+                    mrays_per_s: (reps * set.rays.len()) as f64 / med / 1e6,
                     checksum,
                     checksum_differs,
                 };
@@ -475,7 +491,7 @@ impl BenchReport {
         let _ = writeln!(s, "scene      {} ({} triangles)", self.scene, self.triangles);
         let _ = writeln!(
             s,
-            "rays       primary {}x{} in 4x4 tiles, diffuse and shadow from its hits; median of {} runs",
+            "rays       primary {}x{} in 4x4 tiles, diffuse and shadow from its hits; median of {} runs (each repeats the set to last at least 50 ms)",
             self.resolution.0, self.resolution.1, self.runs
         );
         for n in &self.notes {
