@@ -60,6 +60,7 @@ pub mod bvh;
 pub mod embree;
 pub mod generate;
 pub mod geometry;
+pub mod info;
 pub mod io;
 pub mod math;
 pub mod ray;
@@ -71,4 +72,7 @@ pub mod simd;
 pub use bvh::{BuildOptions, BuildQuality, Bvh8Node, BvhStats, SplitMethod};
 pub use math::{Aabb, Mat3, Mat4, Vec3};
 pub use ray::{Hit, Ray, RayPacket8, RayPacket16};
-pub use scene::{Bsdf, Camera, CommitReport, Light, Material, MaterialId, Scene, SceneBuilder, SceneError, SurfaceHit};
+pub use scene::{
+    Bsdf, CacheError, CacheReport, Camera, CommitReport, Light, Material, MaterialId, Scene, SceneBuilder, SceneError,
+    SurfaceHit,
+};

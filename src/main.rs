@@ -54,6 +54,9 @@ struct BenchArgs {
     /// raypack's BVH build effort.
     #[arg(long, value_enum, default_value_t = QualityArg::Medium)]
     quality: QualityArg,
+    /// Load the BVH from (or save it to) a cache file in this directory.
+    #[arg(long, value_name = "DIR")]
+    bvh_cache: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -131,6 +134,9 @@ struct RenderArgs {
     /// BVH build effort.
     #[arg(long, value_enum, default_value_t = QualityArg::Medium)]
     quality: QualityArg,
+    /// Load the BVH from (or save it to) a cache file in this directory.
+    #[arg(long, value_name = "DIR")]
+    bvh_cache: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -157,6 +163,18 @@ struct InfoArgs {
     /// Check the BVH's structural invariants.
     #[arg(long)]
     validate: bool,
+    /// Only this build quality (default: fast, medium and high).
+    #[arg(long, value_enum)]
+    quality: Option<QualityArg>,
+    /// Load the BVHs from (or save them to) cache files in this directory.
+    #[arg(long, value_name = "DIR")]
+    bvh_cache: Option<PathBuf>,
+    /// Worker threads of the builds (default: all cores).
+    #[arg(short = 't', long = "threads")]
+    threads: Option<usize>,
+    /// Print the figures as JSON.
+    #[arg(long)]
+    json: bool,
 }
 
 /// A failure the CLI reports: bad input or environment exits with 2, as issue #2 asks.
@@ -215,12 +233,30 @@ fn print_warnings(warnings: &[String]) {
     }
 }
 
-fn commit(builder: SceneBuilder, opts: &BuildOptions) -> Scene {
+fn commit(builder: SceneBuilder, opts: &BuildOptions, cache: Option<&Path>) -> Scene {
     let n = builder.num_triangles() + builder.num_spheres();
-    eprint!("[raypack] Building BVH from {n} primitives... ");
     let t = Instant::now();
-    let (scene, report) = builder.commit(opts);
-    eprintln!("Done! ({:.4} sec)", t.elapsed().as_secs_f64());
+    let (scene, report) = match cache {
+        None => {
+            eprint!("[raypack] Building BVH from {n} primitives... ");
+            let r = builder.commit(opts);
+            eprintln!("Done! ({:.4} sec)", t.elapsed().as_secs_f64());
+            r
+        }
+        Some(dir) => {
+            let (scene, report, cache) = builder.commit_cached(opts, dir);
+            for w in cache.warnings() {
+                eprintln!("[raypack] warning: {w}");
+            }
+            let how = if cache.loaded { "Loaded BVH of" } else { "Built BVH (and cached it) from" };
+            eprintln!(
+                "[raypack] {how} {n} primitives: {} ({:.4} sec)",
+                cache.path.display(),
+                t.elapsed().as_secs_f64()
+            );
+            (scene, report)
+        }
+    };
     if report.dropped() > 0 {
         eprintln!("[raypack] warning: {report}");
     }
@@ -259,7 +295,7 @@ fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         print_warnings(&warnings);
         let opts = BuildOptions { quality: a.quality.into(), ..BuildOptions::default() };
         let t = Instant::now();
-        let scene = commit(builder, &opts);
+        let scene = commit(builder, &opts, a.bvh_cache.as_deref());
         let setup_time = [("load", load_time), ("BVH build", t.elapsed().as_secs_f64())];
         let aspect = width as f32 / height as f32;
         let camera = match &a.camera {
@@ -351,46 +387,29 @@ fn progress_bar(len: usize) -> indicatif::ProgressBar {
 }
 
 fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
-    let t = Instant::now();
-    let (builder, warnings) = load(Some(&a.scene))?;
-    let load_time = t.elapsed();
-    print_warnings(&warnings);
-    println!("scene       {}", a.scene.display());
-    println!("load        {:.4} s", load_time.as_secs_f64());
-    for quality in [BuildQuality::Fast, BuildQuality::Medium, BuildQuality::High] {
-        let opts = BuildOptions { quality, ..BuildOptions::default() };
-        let t = Instant::now();
-        let (scene, report) = builder.clone().commit(&opts);
-        let build = t.elapsed();
-        if quality == BuildQuality::Fast {
-            let b = scene.bounds();
-            println!("primitives  {report}");
-            println!(
-                "bounds      [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]",
-                b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z
-            );
-            println!(
-                "materials   {}, lights {}, camera {}",
-                scene.materials.len(),
-                scene.lights.len(),
-                if scene.camera.is_some() { "from file" } else { "framing (none in file)" }
-            );
-        }
-        println!(
-            "build {:<6} {:.4} s: {}",
-            format!("{quality:?}").to_lowercase(),
-            build.as_secs_f64(),
-            scene.bvh_stats()
-        );
-        if a.validate {
-            let bounds: Vec<_> = (0..scene.num_prims() as u32).map(|p| scene.prim_bounds(p)).collect();
-            match raypack::bvh::validate::validate_bvh2(scene.bvh2(), &bounds) {
-                Ok(()) => println!("validate    ok"),
-                Err(e) => return Err(CliError::Usage(format!("BVH invalid: {e}"))),
-            }
-        }
+    use raypack::info::{InfoOptions, scene_info};
+    if a.threads == Some(0) {
+        return Err(CliError::Usage("-t 0: need at least one thread".into()));
     }
-    Ok(())
+    let mut opts = InfoOptions { cache_dir: a.bvh_cache.clone(), validate: a.validate, ..InfoOptions::default() };
+    if let Some(q) = a.quality {
+        opts.qualities = vec![q.into()];
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads.unwrap_or(0))
+        .build()
+        .map_err(|e| CliError::Usage(e.to_string()))?;
+    let info = pool.install(|| scene_info(&a.scene, &opts))?;
+    print_warnings(&info.warnings);
+    if a.json {
+        println!("{:#}", info.json());
+    } else {
+        print!("{}", info.text());
+    }
+    match info.builds.iter().find_map(|b| b.valid.as_ref().and_then(|v| v.as_ref().err())) {
+        Some(e) => Err(CliError::Usage(format!("BVH invalid: {e}"))),
+        None => Ok(()),
+    }
 }
 
 fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
@@ -411,7 +430,20 @@ fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     print_warnings(&warnings);
     let quality: BuildQuality = a.quality.into();
     let t = Instant::now();
-    let (scene, report) = builder.commit(&BuildOptions { quality, ..BuildOptions::default() });
+    let opts = BuildOptions { quality, ..BuildOptions::default() };
+    let (scene, report) = match a.bvh_cache.as_deref() {
+        None => builder.commit(&opts),
+        Some(dir) => {
+            let (scene, report, cache) = builder.commit_cached(&opts, dir);
+            for w in cache.warnings() {
+                eprintln!("[raypack] warning: {w}");
+            }
+            if cache.loaded {
+                eprintln!("[raypack] BVH loaded from {} (the build time below is the load time)", cache.path.display());
+            }
+            (scene, report)
+        }
+    };
     let seconds = t.elapsed().as_secs_f64();
     if report.dropped() > 0 {
         eprintln!("[raypack] warning: {report}");

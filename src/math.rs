@@ -7,7 +7,8 @@ pub use glam::{Mat3, Mat4, Vec2, Vec3, Vec3A, Vec4};
 
 /// An axis-aligned bounding box. [`Aabb::EMPTY`] has `min = +inf`, `max = -inf`, so it
 /// is the identity of [`Aabb::union`] and no ray's slab test can ever hit it.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Aabb {
     /// Lower corner.
     pub min: Vec3,

@@ -10,7 +10,7 @@ use crate::ray::{Hit, Ray};
 /// * Leaf (`count > 0`): primitives `prim_ids[start .. start + count]`.
 /// * Inner (`count == 0`): children at `nodes[start]` and `nodes[start + 1]`.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Bvh2Node {
     /// Bounds of everything below this node.
     pub bounds: Aabb,

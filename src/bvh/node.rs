@@ -40,7 +40,7 @@ pub enum LeafKind {
 ///   least 1), bits 0..32 the index of the first block;
 /// * empty: all bits set ([`NodeRef::EMPTY`]); never dereferenced because the slot's box can
 ///   never be hit.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(transparent)]
 pub struct NodeRef(pub u64);
 
@@ -146,7 +146,7 @@ impl NodeRef {
 /// # Ok::<(), raypack::SceneError>(())
 /// ```
 #[repr(C, align(64))]
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Bvh8Node {
     /// Child boxes, one row of eight lanes per plane: `LOWER_X, UPPER_X, LOWER_Y, UPPER_Y,
     /// LOWER_Z, UPPER_Z`.

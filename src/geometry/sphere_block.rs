@@ -44,7 +44,7 @@ pub fn sphere_lanes<V: Lanes>(
 
 /// Four spheres, structure of arrays: 80 bytes.
 #[repr(C, align(16))]
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Sphere4 {
     /// Centres as rows `[x; 4], [y; 4], [z; 4]`.
     pub center: [[f32; 4]; 3],

@@ -6,7 +6,7 @@
 //! triangles, non-positive radii) and counts them in the [`CommitReport`], as Embree does.
 //! An empty scene is legal: every ray misses.
 
-use crate::bvh::{BuildOptions, BuildPrim, Bvh8, build_bvh2, collapse};
+use crate::bvh::{BuildOptions, BuildPrim, Bvh2, Bvh8, build_bvh2, collapse};
 use crate::math::{Aabb, Vec3};
 use crate::scene::{Camera, Light, Material, MaterialId, Scene, SpheresSoa, TrianglesSoa};
 
@@ -221,6 +221,12 @@ impl SceneBuilder {
     /// Drops untraceable primitives, builds the acceleration structure and returns the
     /// scene with a report of what was kept.
     pub fn commit(self, opts: &BuildOptions) -> (Scene, CommitReport) {
+        let (kept, report) = self.filter();
+        (kept.build(opts), report)
+    }
+
+    /// The first half of [`SceneBuilder::commit`]: drops the primitives that cannot be traced.
+    pub(crate) fn filter(self) -> (Filtered, CommitReport) {
         let mut report = CommitReport::default();
         let SceneBuilder { mut triangles, spheres: in_spheres, mut materials, lights, camera, .. } = self;
         if materials.is_empty() {
@@ -266,7 +272,25 @@ impl SceneBuilder {
         }
         report.triangles = triangles.len();
         report.spheres = spheres.len();
+        (Filtered { triangles, spheres, materials, lights, camera }, report)
+    }
+}
 
+/// A scene after [`SceneBuilder::commit`]'s filtering, before its acceleration structure
+/// exists: either built ([`Filtered::build`]) or loaded from the BVH cache
+/// ([`crate::scene::cache`]).
+pub(crate) struct Filtered {
+    pub(crate) triangles: TrianglesSoa,
+    pub(crate) spheres: SpheresSoa,
+    pub(crate) materials: Vec<Material>,
+    pub(crate) lights: Vec<Light>,
+    pub(crate) camera: Option<Camera>,
+}
+
+impl Filtered {
+    /// Builds the binary BVH and collapses it into the 8-wide one.
+    pub(crate) fn build(self, opts: &BuildOptions) -> Scene {
+        let Filtered { triangles, spheres, materials, lights, camera } = self;
         let nt = triangles.len();
         let mut prims: Vec<BuildPrim> = (0..nt)
             .map(|i| BuildPrim { bounds: triangles.bounds(i), id: i as u32 })
@@ -274,9 +298,16 @@ impl SceneBuilder {
             .collect();
         let bounds = prims.iter().fold(Aabb::EMPTY, |b, p| b.union(&p.bounds));
         let bvh2 = build_bvh2(&mut prims, opts);
+        drop(prims);
         let mut scene = Scene { triangles, spheres, materials, lights, camera, bounds, bvh2, bvh8: Bvh8::default() };
         scene.bvh8 = collapse(&scene.bvh2, |id| scene.prim_shape(id), &opts.collapse);
-        (scene, report)
+        scene
+    }
+
+    /// The scene with acceleration structures that were built for exactly this geometry.
+    pub(crate) fn with_accel(self, bounds: Aabb, bvh2: Bvh2, bvh8: Bvh8) -> Scene {
+        let Filtered { triangles, spheres, materials, lights, camera } = self;
+        Scene { triangles, spheres, materials, lights, camera, bounds, bvh2, bvh8 }
     }
 }
 

@@ -2,6 +2,7 @@
 //! the acceleration structure built over it at commit.
 
 pub mod builder;
+pub mod cache;
 pub mod camera;
 pub mod light;
 pub mod material;
@@ -9,6 +10,7 @@ pub mod query;
 pub mod store;
 
 pub use builder::{CommitReport, SceneBuilder, SceneError};
+pub use cache::{CacheError, CacheReport};
 pub use camera::Camera;
 pub use light::Light;
 pub use material::{Bsdf, Material, MaterialId};

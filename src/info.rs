@@ -1,0 +1,318 @@
+//! `raypack info SCENE`: what a scene holds and what it costs — load time, build time and
+//! tree statistics per build quality, bytes per triangle of the scene store and of the
+//! acceleration structures, and the peak resident memory of the process.
+
+use crate::bvh::{BuildOptions, BuildQuality, Bvh2, Bvh8Stats, BvhStats};
+use crate::io::LoadError;
+use crate::math::Aabb;
+use crate::scene::{CommitReport, Scene, SceneBuilder};
+use serde_json::json;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// What [`scene_info`] does.
+#[derive(Clone, Debug)]
+pub struct InfoOptions {
+    /// Build qualities to time, in order.
+    pub qualities: Vec<BuildQuality>,
+    /// Commit through the BVH cache in this directory ([`SceneBuilder::commit_cached`]).
+    pub cache_dir: Option<PathBuf>,
+    /// Check the structural invariants of both BVHs after each build.
+    pub validate: bool,
+}
+
+impl Default for InfoOptions {
+    fn default() -> Self {
+        Self {
+            qualities: vec![BuildQuality::Fast, BuildQuality::Medium, BuildQuality::High],
+            cache_dir: None,
+            validate: false,
+        }
+    }
+}
+
+/// Figures of one build (or cache load) of the acceleration structures.
+#[derive(Clone, Debug)]
+pub struct BuildInfo {
+    /// The quality asked for.
+    pub quality: BuildQuality,
+    /// Wall-clock seconds of the commit (filtering, then building or loading from the cache).
+    pub seconds: f64,
+    /// True when the structures came from the BVH cache.
+    pub from_cache: bool,
+    /// Cache problems (rejected file, failed write), one line each.
+    pub cache_warnings: Vec<String>,
+    /// Statistics of the binary BVH.
+    pub bvh2: BvhStats,
+    /// Statistics of the 8-wide BVH the kernels traverse (with its bytes).
+    pub bvh8: Bvh8Stats,
+    /// Bytes of the binary BVH (nodes and primitive ids).
+    pub bvh2_bytes: usize,
+    /// The result of `--validate`: `None` when not asked for.
+    pub valid: Option<Result<(), String>>,
+}
+
+/// Everything `raypack info` prints.
+#[derive(Clone, Debug)]
+pub struct SceneInfo {
+    /// The scene file.
+    pub path: PathBuf,
+    /// Loader warnings.
+    pub warnings: Vec<String>,
+    /// Seconds to parse the file into a [`SceneBuilder`].
+    pub load_seconds: f64,
+    /// Primitives kept and dropped by the commit.
+    pub report: CommitReport,
+    /// Bounds of the kept geometry.
+    pub bounds: Aabb,
+    /// Materials, lights, and whether the file has a camera.
+    pub materials: usize,
+    /// Lights.
+    pub lights: usize,
+    /// True when the file sets a camera.
+    pub has_camera: bool,
+    /// Rayon threads the builds ran on.
+    pub threads: usize,
+    /// Bytes of the committed scene store (vertex positions and normals, indices, per-triangle
+    /// materials, spheres).
+    pub store_bytes: usize,
+    /// One entry per quality.
+    pub builds: Vec<BuildInfo>,
+    /// Peak resident memory of the process at the end ([`peak_resident_bytes`]).
+    pub peak_resident_bytes: Option<u64>,
+}
+
+/// Bytes of a committed scene's geometry store (materials, lights and camera excluded).
+pub fn store_bytes(scene: &Scene) -> usize {
+    let t = &scene.triangles;
+    let s = &scene.spheres;
+    std::mem::size_of_val(t.positions.as_slice())
+        + std::mem::size_of_val(t.normals.as_slice())
+        + std::mem::size_of_val(t.indices.as_slice())
+        + std::mem::size_of_val(t.material.as_slice())
+        + std::mem::size_of_val(s.center.as_slice())
+        + std::mem::size_of_val(s.radius.as_slice())
+        + std::mem::size_of_val(s.material.as_slice())
+}
+
+/// Bytes of a binary BVH.
+pub fn bvh2_bytes(bvh: &Bvh2) -> usize {
+    std::mem::size_of_val(bvh.nodes.as_slice()) + std::mem::size_of_val(bvh.prim_ids.as_slice())
+}
+
+/// Peak resident set size of this process (`VmHWM` of `/proc/self/status`). Linux only:
+/// `None` elsewhere or when the file cannot be read.
+pub fn peak_resident_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: u64 = line["VmHWM:".len()..].trim().trim_end_matches("kB").trim().parse().ok()?;
+    Some(kib * 1024)
+}
+
+/// Loads `path`, commits it at each quality of `opts` (through the cache when asked) and
+/// gathers the figures.
+pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, LoadError> {
+    let t = Instant::now();
+    let (builder, warnings) = crate::io::load_scene_with_warnings(path)?;
+    let load_seconds = t.elapsed().as_secs_f64();
+    let mut info = SceneInfo {
+        path: path.to_path_buf(),
+        warnings,
+        load_seconds,
+        report: CommitReport::default(),
+        bounds: Aabb::EMPTY,
+        materials: 0,
+        lights: 0,
+        has_camera: false,
+        threads: rayon::current_num_threads(),
+        store_bytes: 0,
+        builds: Vec::new(),
+        peak_resident_bytes: None,
+    };
+    let mut builder = Some(builder);
+    for (i, &quality) in opts.qualities.iter().enumerate() {
+        let last = i + 1 == opts.qualities.len();
+        let b: SceneBuilder = if last { builder.take().expect("builder") } else { builder.clone().expect("builder") };
+        let build_opts = BuildOptions { quality, ..BuildOptions::default() };
+        let t = Instant::now();
+        let (scene, report, cache) = match &opts.cache_dir {
+            Some(dir) => {
+                let (s, r, c) = b.commit_cached(&build_opts, dir);
+                (s, r, Some(c))
+            }
+            None => {
+                let (s, r) = b.commit(&build_opts);
+                (s, r, None)
+            }
+        };
+        let seconds = t.elapsed().as_secs_f64();
+        info.report = report;
+        info.bounds = scene.bounds();
+        info.materials = scene.materials.len();
+        info.lights = scene.lights.len();
+        info.has_camera = scene.camera.is_some();
+        info.store_bytes = store_bytes(&scene);
+        let valid = opts.validate.then(|| {
+            let bounds: Vec<_> = (0..scene.num_prims() as u32).map(|p| scene.prim_bounds(p)).collect();
+            crate::bvh::validate::validate_bvh2(scene.bvh2(), &bounds)
+                .map_err(|e| format!("binary BVH: {e}"))
+                .and_then(|()| crate::bvh::validate::validate_bvh8(scene.bvh8(), &bounds))
+                .map_err(|e| format!("8-wide BVH: {e}"))
+        });
+        info.builds.push(BuildInfo {
+            quality,
+            seconds,
+            from_cache: cache.as_ref().is_some_and(|c| c.loaded),
+            cache_warnings: cache.map(|c| c.warnings()).unwrap_or_default(),
+            bvh2: scene.bvh_stats(),
+            bvh8: scene.bvh8().stats(),
+            bvh2_bytes: bvh2_bytes(scene.bvh2()),
+            valid,
+        });
+    }
+    info.peak_resident_bytes = peak_resident_bytes();
+    Ok(info)
+}
+
+fn quality_name(q: BuildQuality) -> String {
+    format!("{q:?}").to_lowercase()
+}
+
+fn mb(bytes: usize) -> String {
+    format!("{:.1} MB", bytes as f64 / 1e6)
+}
+
+impl SceneInfo {
+    fn per_triangle(&self, bytes: usize) -> f64 {
+        bytes as f64 / self.report.triangles.max(1) as f64
+    }
+
+    /// The figures as text, one item per line.
+    pub fn text(&self) -> String {
+        use std::fmt::Write;
+        let mut s = String::new();
+        let b = &self.bounds;
+        let _ = writeln!(s, "scene        {}", self.path.display());
+        let _ = writeln!(s, "load         {:.4} s", self.load_seconds);
+        let _ = writeln!(s, "primitives   {}", self.report);
+        let _ = writeln!(
+            s,
+            "bounds       [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]",
+            b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z
+        );
+        let _ = writeln!(
+            s,
+            "materials    {}, lights {}, camera {}",
+            self.materials,
+            self.lights,
+            if self.has_camera { "from file" } else { "framing (none in file)" }
+        );
+        let _ = writeln!(
+            s,
+            "scene store  {} ({:.1} bytes/triangle: positions, normals, indices, materials)",
+            mb(self.store_bytes),
+            self.per_triangle(self.store_bytes)
+        );
+        let _ = writeln!(s, "threads      {}", self.threads);
+        for bi in &self.builds {
+            let how = if bi.from_cache { "loaded from the BVH cache" } else { "built" };
+            let _ = writeln!(s, "{:<12} {:.4} s, {how}", format!("build {}", quality_name(bi.quality)), bi.seconds);
+            for w in &bi.cache_warnings {
+                let _ = writeln!(s, "  warning    {w}");
+            }
+            let _ = writeln!(s, "  bvh2       {}", bi.bvh2);
+            let _ = writeln!(s, "  bvh8       {}", bi.bvh8);
+            let _ = writeln!(
+                s,
+                "  memory     bvh8 {} ({:.1} bytes/triangle) + bvh2 {} ({:.1} bytes/triangle), both resident",
+                mb(bi.bvh8.bytes),
+                self.per_triangle(bi.bvh8.bytes),
+                mb(bi.bvh2_bytes),
+                self.per_triangle(bi.bvh2_bytes)
+            );
+            match &bi.valid {
+                Some(Ok(())) => {
+                    let _ = writeln!(s, "  validate   ok");
+                }
+                Some(Err(e)) => {
+                    let _ = writeln!(s, "  validate   FAILED: {e}");
+                }
+                None => {}
+            }
+        }
+        let peak = self.peak_resident_bytes.map_or("n/a".to_string(), |b| mb(b as usize));
+        let _ = writeln!(s, "peak memory  {peak} (resident, VmHWM; Linux only)");
+        s
+    }
+
+    /// The figures as JSON.
+    pub fn json(&self) -> serde_json::Value {
+        let b = &self.bounds;
+        let builds: Vec<_> = self
+            .builds
+            .iter()
+            .map(|bi| {
+                json!({
+                    "quality": quality_name(bi.quality),
+                    "seconds": bi.seconds,
+                    "from_cache": bi.from_cache,
+                    "cache_warnings": bi.cache_warnings,
+                    "bvh2": {
+                        "sah_cost": bi.bvh2.sah_cost,
+                        "inner_nodes": bi.bvh2.inner_nodes,
+                        "leaves": bi.bvh2.leaves,
+                        "mean_leaf_size": bi.bvh2.mean_leaf_size,
+                        "depth": bi.bvh2.depth,
+                        "bytes": bi.bvh2_bytes,
+                        "bytes_per_triangle": self.per_triangle(bi.bvh2_bytes),
+                    },
+                    "bvh8": {
+                        "sah_cost": bi.bvh8.sah_cost,
+                        "nodes": bi.bvh8.nodes,
+                        "leaves": bi.bvh8.leaves,
+                        "tri_blocks": bi.bvh8.tri_blocks,
+                        "sphere_blocks": bi.bvh8.sphere_blocks,
+                        "node_fill": bi.bvh8.node_fill,
+                        "block_fill": bi.bvh8.block_fill,
+                        "depth": bi.bvh8.depth,
+                        "bytes": bi.bvh8.bytes,
+                        "bytes_per_triangle": self.per_triangle(bi.bvh8.bytes),
+                    },
+                    "valid": bi.valid.as_ref().map(|v| v.clone().err().unwrap_or_else(|| "ok".into())),
+                })
+            })
+            .collect();
+        json!({
+            "scene": self.path.display().to_string(),
+            "load_seconds": self.load_seconds,
+            "triangles": self.report.triangles,
+            "spheres": self.report.spheres,
+            "dropped": self.report.dropped(),
+            "bounds": [[b.min.x, b.min.y, b.min.z], [b.max.x, b.max.y, b.max.z]],
+            "materials": self.materials,
+            "lights": self.lights,
+            "threads": self.threads,
+            "store_bytes": self.store_bytes,
+            "store_bytes_per_triangle": self.per_triangle(self.store_bytes),
+            "builds": builds,
+            "peak_resident_bytes": self.peak_resident_bytes,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn peak_memory_is_read_on_linux() {
+        let peak = peak_resident_bytes();
+        if cfg!(target_os = "linux") {
+            // At least the pages this vector touches.
+            let v = vec![1u8; 8 << 20];
+            assert!(peak_resident_bytes().unwrap() >= v.len() as u64 && v.iter().all(|&b| b == 1));
+        } else {
+            assert_eq!(peak, None);
+        }
+    }
+}

@@ -1,0 +1,597 @@
+//! The BVH cache: a committed scene's acceleration structures saved to a file and loaded back
+//! by memory-mapping, so that a second start skips the build.
+//!
+//! A cache file is content-addressed, as ccache's objects are: its name and its header carry a
+//! [`CacheKey`], a 128-bit XXH3 hash of the committed geometry (vertex positions, triangle
+//! indices, sphere centres and radii, after [`SceneBuilder::commit`]'s filtering), of the
+//! [`BuildOptions`], of the leaf block type and of [`FORMAT_VERSION`]. A file is trusted only
+//! when its magic, version and key match, its length is the one its header records and the
+//! XXH3-64 checksum of all its other bytes agrees; its arrays are then copied out of the
+//! mapping and checked for the ranges the traversal kernels index with (child and block
+//! indices, depth, primitive ids, empty slots), so that even a forged file cannot make a
+//! query panic. Anything else is reported in [`CacheReport::rejected`], rebuilt and
+//! overwritten. Files are written atomically (a temporary file renamed over the old one).
+//!
+//! Layout (little-endian, as the machine writes it):
+//!
+//! | bytes | content |
+//! |---|---|
+//! | 0..64 | [`FileHeader`]: magic, version, section count, key, checksum, file length |
+//! | 64.. | one [`SectionEntry`] (32 bytes) per section: name, element size, offset, count |
+//! | then | the sections, each a plain array of `bytemuck::Pod` elements starting on a 64-byte boundary |
+//!
+//! Sections are looked up by name and element size, so a new leaf block type (for example
+//! watertight triangle blocks) is one more `Pod` array: a name, a [`SectionWriter::push`] and
+//! a [`CacheFile::section`] call.
+
+use crate::bvh::{BuildOptions, Bvh2, Bvh2Node, Bvh8, Bvh8Node, DefaultTriBlock, LeafKind, MAX_DEPTH};
+use crate::geometry::{Sphere4, Tri8, TriBlock};
+use crate::math::Aabb;
+use crate::scene::{CommitReport, Scene, SceneBuilder};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use xxhash_rust::xxh3::Xxh3;
+
+/// Version of the file layout and of everything the key does not see; bump it whenever the
+/// builder, the collapse or a block layout changes what a given key would produce.
+pub const FORMAT_VERSION: u32 = 1;
+/// First eight bytes of every cache file (the `\r\n` catches text-mode mangling, as PNG's does).
+pub const MAGIC: [u8; 8] = *b"RPKBVH\r\n";
+/// File name extension of cache files.
+pub const EXTENSION: &str = "rpbvh";
+
+// SAFETY: `Tri8` (src/geometry/tri_block.rs) is `#[repr(C, align(64))]` with fields
+// `[[f32; 8]; 3]` x 3 and `[u32; 8]`: 288 + 32 = 320 bytes, which its own assertion and the
+// one below pin as its size, so it has no padding; every bit pattern of `f32`/`u32` is valid,
+// and it is `Copy + 'static`. (A `#[derive(Pod)]` in tri_block.rs would say the same; that
+// file belongs to other work at the time of writing.)
+unsafe impl bytemuck::Zeroable for Tri8 {}
+// SAFETY: see the `Zeroable` impl above.
+unsafe impl bytemuck::Pod for Tri8 {}
+const _: () = assert!(std::mem::size_of::<Tri8>() == 3 * 3 * 8 * 4 + 8 * 4);
+
+/// The content hash a cache file is named and checked by.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct CacheKey(pub u128);
+
+impl std::fmt::Display for CacheKey {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{:032x}", self.0)
+    }
+}
+
+impl CacheKey {
+    /// The key of a scene's committed geometry built with `opts`.
+    ///
+    /// The options enter through their `Debug` text, which names every field and prints
+    /// floats exactly, so a field added to [`BuildOptions`] later changes the key by itself.
+    pub fn of(triangles: &crate::scene::TrianglesSoa, spheres: &crate::scene::SpheresSoa, opts: &BuildOptions) -> Self {
+        let mut h = Xxh3::new();
+        h.update(b"raypack bvh cache");
+        h.update(&FORMAT_VERSION.to_le_bytes());
+        h.update(std::any::type_name::<DefaultTriBlock>().as_bytes());
+        h.update(&(std::mem::size_of::<DefaultTriBlock>() as u64).to_le_bytes());
+        h.update(format!("{opts:?}").as_bytes());
+        for bytes in [
+            bytemuck::cast_slice::<_, u8>(&triangles.positions),
+            bytemuck::cast_slice(&triangles.indices),
+            bytemuck::cast_slice(&spheres.center),
+            bytemuck::cast_slice(&spheres.radius),
+        ] {
+            h.update(&(bytes.len() as u64).to_le_bytes());
+            h.update(bytes);
+        }
+        CacheKey(h.digest128())
+    }
+
+    /// The file this key names inside `dir`.
+    pub fn path_in(&self, dir: &Path) -> PathBuf {
+        dir.join(format!("{self}.{EXTENSION}"))
+    }
+}
+
+/// Why a cache file was not used, or could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum CacheError {
+    /// Reading, writing or creating the file or its directory failed.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file or directory.
+        path: PathBuf,
+        /// What the system said.
+        source: std::io::Error,
+    },
+    /// The first bytes are not [`MAGIC`].
+    #[error("{}: not a raypack BVH cache file (bad magic bytes)", path.display())]
+    BadMagic {
+        /// The file.
+        path: PathBuf,
+    },
+    /// Written by another version of the format.
+    #[error("{}: cache format version {found}, this raypack reads version {expected}", path.display())]
+    Version {
+        /// The file.
+        path: PathBuf,
+        /// Version in the file.
+        found: u32,
+        /// [`FORMAT_VERSION`].
+        expected: u32,
+    },
+    /// Written for other geometry or other build options.
+    #[error("{}: stale: written for key {found}, the scene and options give {expected}", path.display())]
+    Stale {
+        /// The file.
+        path: PathBuf,
+        /// Key in the file.
+        found: CacheKey,
+        /// Key of the scene being committed.
+        expected: CacheKey,
+    },
+    /// Shorter than its header says (or than a header).
+    #[error("{}: truncated: {len} bytes, expected {expected}", path.display())]
+    Truncated {
+        /// The file.
+        path: PathBuf,
+        /// Its length.
+        len: u64,
+        /// The length its header records (or the header's).
+        expected: u64,
+    },
+    /// The checksum of the file's bytes disagrees with the header's.
+    #[error("{}: checksum mismatch (the file was edited or corrupted)", path.display())]
+    Checksum {
+        /// The file.
+        path: PathBuf,
+    },
+    /// Well-formed header, but the sections or the trees in them are not what a build makes.
+    #[error("{}: malformed: {what}", path.display())]
+    Malformed {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        what: String,
+    },
+}
+
+/// What [`SceneBuilder::commit_cached`] did with the cache.
+#[derive(Debug)]
+pub struct CacheReport {
+    /// The cache file of this scene and these options.
+    pub path: PathBuf,
+    /// True when the acceleration structures came from the file.
+    pub loaded: bool,
+    /// The file that was there but not trusted (and has been rebuilt), if any.
+    pub rejected: Option<CacheError>,
+    /// Writing the rebuilt structures failed (the scene is fine; the next start builds again).
+    pub write_error: Option<CacheError>,
+}
+
+impl CacheReport {
+    /// One line per problem, for the user (empty when the cache worked).
+    pub fn warnings(&self) -> Vec<String> {
+        let mut w = Vec::new();
+        if let Some(e) = &self.rejected {
+            w.push(format!("BVH cache rejected and rebuilt: {e}"));
+        }
+        if let Some(e) = &self.write_error {
+            w.push(format!("BVH cache not written: {e}"));
+        }
+        w
+    }
+}
+
+impl SceneBuilder {
+    /// [`SceneBuilder::commit`] through a BVH cache in `dir` (created if missing): loads the
+    /// acceleration structures from the file of this geometry and `opts` when it is valid,
+    /// otherwise builds them and writes the file. Never fails: cache problems are reported
+    /// in the [`CacheReport`] and the scene is built instead.
+    ///
+    /// ```
+    /// use raypack::{BuildOptions, Material, Ray, SceneBuilder, Vec3};
+    ///
+    /// let dir = std::env::temp_dir().join(format!("raypack-doc-cache-{}", std::process::id()));
+    /// let scene = || {
+    ///     let mut b = SceneBuilder::new();
+    ///     let m = b.add_material(Material::default());
+    ///     b.add_mesh(&[Vec3::ZERO, Vec3::X, Vec3::Y], &[[0, 1, 2]], m).unwrap();
+    ///     b
+    /// };
+    /// let (_, _, first) = scene().commit_cached(&BuildOptions::default(), &dir);
+    /// let (s, _, second) = scene().commit_cached(&BuildOptions::default(), &dir);
+    /// assert!(!first.loaded && second.loaded && second.warnings().is_empty());
+    /// assert_eq!(s.intersect1(&Ray::new(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z)).t, 1.0);
+    /// # std::fs::remove_dir_all(&dir).unwrap();
+    /// ```
+    pub fn commit_cached(self, opts: &BuildOptions, dir: &Path) -> (Scene, CommitReport, CacheReport) {
+        let (kept, report) = self.filter();
+        let key = CacheKey::of(&kept.triangles, &kept.spheres, opts);
+        let path = key.path_in(dir);
+        let num_prims = kept.triangles.len() + kept.spheres.len();
+        let mut cache = CacheReport { path: path.clone(), loaded: false, rejected: None, write_error: None };
+        match load(&path, key, num_prims) {
+            Ok(Some(accel)) => {
+                cache.loaded = true;
+                return (kept.with_accel(accel.bounds, accel.bvh2, accel.bvh8), report, cache);
+            }
+            Ok(None) => {}
+            Err(e) => cache.rejected = Some(e),
+        }
+        let scene = kept.build(opts);
+        cache.write_error = store(dir, &path, key, &scene).err();
+        (scene, report, cache)
+    }
+}
+
+/// The acceleration structures a cache file holds.
+struct Accel {
+    bounds: Aabb,
+    bvh2: Bvh2,
+    bvh8: Bvh8,
+}
+
+/// The file header: 64 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct FileHeader {
+    /// [`MAGIC`].
+    pub magic: [u8; 8],
+    /// [`FORMAT_VERSION`].
+    pub version: u32,
+    /// Number of [`SectionEntry`]s after the header.
+    pub sections: u32,
+    /// The [`CacheKey`], little-endian.
+    pub key: [u8; 16],
+    /// XXH3-64 of every byte of the file but these eight.
+    pub checksum: u64,
+    /// Length of the whole file.
+    pub file_len: u64,
+    /// Zero.
+    pub reserved: [u64; 2],
+}
+const _: () = assert!(std::mem::size_of::<FileHeader>() == 64);
+const CHECKSUM_AT: usize = std::mem::offset_of!(FileHeader, checksum);
+
+/// One section of the table after the header: 32 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct SectionEntry {
+    /// ASCII name, zero-padded.
+    pub name: [u8; 12],
+    /// `size_of` of one element.
+    pub elem_size: u32,
+    /// Byte offset of the first element from the start of the file (a multiple of 64).
+    pub offset: u64,
+    /// Number of elements.
+    pub count: u64,
+}
+const _: () = assert!(std::mem::size_of::<SectionEntry>() == 32);
+
+/// Alignment of every section in the file (a cache line, the strictest block alignment).
+const SECTION_ALIGN: u64 = 64;
+
+fn section_name(name: &str) -> [u8; 12] {
+    let mut n = [0u8; 12];
+    assert!(name.len() <= 12, "section name {name:?} longer than 12 bytes");
+    n[..name.len()].copy_from_slice(name.as_bytes());
+    n
+}
+
+/// Collects `Pod` arrays and writes them as one cache file.
+pub struct SectionWriter<'a> {
+    entries: Vec<SectionEntry>,
+    data: Vec<&'a [u8]>,
+}
+
+impl<'a> SectionWriter<'a> {
+    fn new() -> Self {
+        Self { entries: Vec::new(), data: Vec::new() }
+    }
+
+    /// Adds the array `items` under `name` (at most 12 ASCII bytes).
+    pub fn push<T: bytemuck::Pod>(&mut self, name: &str, items: &'a [T]) {
+        self.entries.push(SectionEntry {
+            name: section_name(name),
+            elem_size: std::mem::size_of::<T>() as u32,
+            offset: 0,
+            count: items.len() as u64,
+        });
+        self.data.push(bytemuck::cast_slice(items));
+    }
+
+    /// Writes header, table and sections to `out`, returning the number of bytes.
+    fn write_to(mut self, key: CacheKey, out: &mut impl Write) -> std::io::Result<u64> {
+        let table_end = (64 + 32 * self.entries.len()) as u64;
+        let mut at = table_end.next_multiple_of(SECTION_ALIGN);
+        for (e, d) in self.entries.iter_mut().zip(&self.data) {
+            e.offset = at;
+            at = (at + d.len() as u64).next_multiple_of(SECTION_ALIGN);
+        }
+        let file_len = self.data.last().map_or(table_end, |d| self.entries.last().unwrap().offset + d.len() as u64);
+        let mut header = FileHeader {
+            magic: MAGIC,
+            version: FORMAT_VERSION,
+            sections: self.entries.len() as u32,
+            key: key.0.to_le_bytes(),
+            checksum: 0,
+            file_len,
+            reserved: [0; 2],
+        };
+        let table: &[u8] = bytemuck::cast_slice(&self.entries);
+        let zeros = [0u8; SECTION_ALIGN as usize];
+        // The pieces of the file in order: header, table, then per section padding and data.
+        let mut pieces: Vec<&[u8]> = vec![table];
+        let mut pos = table_end;
+        for (e, d) in self.entries.iter().zip(&self.data) {
+            pieces.push(&zeros[..(e.offset - pos) as usize]);
+            pieces.push(d);
+            pos = e.offset + d.len() as u64;
+        }
+        let mut h = Xxh3::new();
+        let head_bytes = bytemuck::bytes_of(&header);
+        h.update(&head_bytes[..CHECKSUM_AT]);
+        h.update(&head_bytes[CHECKSUM_AT + 8..]);
+        for p in &pieces {
+            h.update(p);
+        }
+        header.checksum = h.digest();
+        out.write_all(bytemuck::bytes_of(&header))?;
+        for p in &pieces {
+            out.write_all(p)?;
+        }
+        out.flush()?;
+        Ok(file_len)
+    }
+}
+
+/// A cache file mapped into memory whose header, length and checksum have been checked.
+pub struct CacheFile<'a> {
+    path: &'a Path,
+    bytes: &'a [u8],
+    entries: Vec<SectionEntry>,
+}
+
+impl<'a> CacheFile<'a> {
+    /// Checks `bytes` (the whole file at `path`) against `key`.
+    fn check(path: &'a Path, bytes: &'a [u8], key: CacheKey) -> Result<Self, CacheError> {
+        let p = || path.to_path_buf();
+        let header_len = std::mem::size_of::<FileHeader>();
+        if bytes.len() < header_len {
+            if bytes.len() >= 8 && bytes[..8] != MAGIC {
+                return Err(CacheError::BadMagic { path: p() });
+            }
+            return Err(CacheError::Truncated { path: p(), len: bytes.len() as u64, expected: header_len as u64 });
+        }
+        let header: FileHeader = bytemuck::pod_read_unaligned(&bytes[..header_len]);
+        if header.magic != MAGIC {
+            return Err(CacheError::BadMagic { path: p() });
+        }
+        if header.version != FORMAT_VERSION {
+            return Err(CacheError::Version { path: p(), found: header.version, expected: FORMAT_VERSION });
+        }
+        let found = CacheKey(u128::from_le_bytes(header.key));
+        if found != key {
+            return Err(CacheError::Stale { path: p(), found, expected: key });
+        }
+        if (bytes.len() as u64) < header.file_len {
+            return Err(CacheError::Truncated { path: p(), len: bytes.len() as u64, expected: header.file_len });
+        }
+        let mut h = Xxh3::new();
+        h.update(&bytes[..CHECKSUM_AT]);
+        h.update(&bytes[CHECKSUM_AT + 8..]);
+        if h.digest() != header.checksum {
+            return Err(CacheError::Checksum { path: p() });
+        }
+        if bytes.len() as u64 != header.file_len {
+            // Consistent checksum over extra bytes: only a forged file gets here.
+            return Err(CacheError::Malformed { path: p(), what: "trailing bytes".into() });
+        }
+        let table_end = 64 + 32 * header.sections as usize;
+        let table = bytes.get(64..table_end).ok_or_else(|| CacheError::Malformed {
+            path: p(),
+            what: format!("{} sections do not fit", header.sections),
+        })?;
+        let entries = table.chunks_exact(32).map(bytemuck::pod_read_unaligned).collect();
+        Ok(Self { path, bytes, entries })
+    }
+
+    /// Copies out section `name`, checking its element size and extent.
+    pub fn section<T: bytemuck::Pod>(&self, name: &str) -> Result<Vec<T>, CacheError> {
+        let malformed = |what: String| CacheError::Malformed { path: self.path.to_path_buf(), what };
+        let wanted = section_name(name);
+        let e =
+            self.entries.iter().find(|e| e.name == wanted).ok_or_else(|| malformed(format!("no section {name}")))?;
+        let size = std::mem::size_of::<T>();
+        if e.elem_size as usize != size {
+            return Err(malformed(format!("section {name} has {}-byte elements, expected {size}", e.elem_size)));
+        }
+        let range = e
+            .count
+            .checked_mul(size as u64)
+            .and_then(|n| n.checked_add(e.offset))
+            .filter(|&end| end <= self.bytes.len() as u64)
+            .map(|end| e.offset as usize..end as usize)
+            .ok_or_else(|| malformed(format!("section {name} runs past the end of the file")))?;
+        if size == 0 {
+            return Ok(Vec::new());
+        }
+        Ok(bytemuck::pod_collect_to_vec(&self.bytes[range]))
+    }
+}
+
+/// Reads the cache file at `path`: `Ok(None)` when there is none.
+fn load(path: &Path, key: CacheKey, num_prims: usize) -> Result<Option<Accel>, CacheError> {
+    let file = match std::fs::File::open(path) {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(io(path)(e)),
+    };
+    let len = file.metadata().map_err(io(path))?.len();
+    if len < std::mem::size_of::<FileHeader>() as u64 {
+        let bytes = std::fs::read(path).map_err(io(path))?;
+        return CacheFile::check(path, &bytes, key).map(|_| None);
+    }
+    // SAFETY: the mapping is read-only and lives only inside this function; everything used
+    // afterwards is copied out of it. raypack never modifies a cache file in place (it
+    // renames a new file over it, which leaves this mapping's inode intact). Another process
+    // truncating the file while it is mapped could raise SIGBUS, the accepted risk of every
+    // memory-mapped reader; bytes changed under us are caught by the checksum or the checks.
+    let map = unsafe { memmap2::Mmap::map(&file) }.map_err(io(path))?;
+    let file = CacheFile::check(path, &map, key)?;
+    let accel = read_accel(&file)?;
+    check_accel(&accel, num_prims).map_err(|what| CacheError::Malformed { path: path.to_path_buf(), what })?;
+    Ok(Some(accel))
+}
+
+fn read_accel(f: &CacheFile) -> Result<Accel, CacheError> {
+    let bounds = f.section::<Aabb>("bounds")?;
+    let bounds = match bounds[..] {
+        [b] => b,
+        _ => return Err(CacheError::Malformed { path: f.path.to_path_buf(), what: "bounds is not one box".into() }),
+    };
+    Ok(Accel {
+        bounds,
+        bvh2: Bvh2 { nodes: f.section::<Bvh2Node>("bvh2.nodes")?, prim_ids: f.section("bvh2.prims")? },
+        bvh8: Bvh8 {
+            nodes: f.section::<Bvh8Node>("bvh8.nodes")?,
+            tris: f.section::<DefaultTriBlock>("bvh8.tris")?,
+            spheres: f.section::<Sphere4>("bvh8.spheres")?,
+        },
+    })
+}
+
+/// The ranges the traversal kernels index with: every child, block and primitive reference
+/// in range, each node reached once, depth at most [`MAX_DEPTH`], empty slots never hit.
+fn check_accel(a: &Accel, num_prims: usize) -> Result<(), String> {
+    let n2 = &a.bvh2.nodes;
+    if n2.is_empty() {
+        return Err("binary BVH without a root".into());
+    }
+    if a.bvh2.prim_ids.iter().any(|&p| p as usize >= num_prims) {
+        return Err("binary BVH refers to a primitive that does not exist".into());
+    }
+    let mut reached = vec![false; n2.len()];
+    let mut stack = vec![(0usize, 1usize)];
+    while let Some((i, depth)) = stack.pop() {
+        if std::mem::replace(&mut reached[i], true) || depth > MAX_DEPTH {
+            return Err(format!("binary BVH node {i} reached twice or deeper than {MAX_DEPTH}"));
+        }
+        let n = &n2[i];
+        let (start, count) = (n.start as usize, n.count as usize);
+        if n.is_leaf() {
+            if start + count > a.bvh2.prim_ids.len() {
+                return Err(format!("binary BVH leaf {i} out of range"));
+            }
+        } else if a.bvh2.prim_ids.is_empty() {
+            return Err("empty binary BVH with an inner root".into());
+        } else if start + 1 >= n2.len() {
+            return Err(format!("binary BVH node {i} has children out of range"));
+        } else {
+            stack.extend([(start, depth + 1), (start + 1, depth + 1)]);
+        }
+    }
+
+    let b8 = &a.bvh8;
+    if b8.nodes.is_empty() {
+        return Err("8-wide BVH without a root".into());
+    }
+    let prim_ok = |p: u32| p == u32::MAX || (p as usize) < num_prims;
+    if !b8.tris.iter().all(|b| (0..DefaultTriBlock::M).all(|l| prim_ok(b.prim(l))))
+        || !b8.spheres.iter().all(|b| b.prim.iter().all(|&p| prim_ok(p)))
+    {
+        return Err("8-wide BVH block refers to a primitive that does not exist".into());
+    }
+    let mut reached = vec![false; b8.nodes.len()];
+    let mut stack = vec![(0usize, 1usize)];
+    while let Some((i, depth)) = stack.pop() {
+        if std::mem::replace(&mut reached[i], true) || depth > MAX_DEPTH {
+            return Err(format!("8-wide BVH node {i} reached twice or deeper than {MAX_DEPTH}"));
+        }
+        let n = &b8.nodes[i];
+        for (k, &c) in n.children.iter().enumerate() {
+            if c.is_empty() {
+                if n.child_bounds(k) != Aabb::EMPTY {
+                    return Err(format!("8-wide BVH node {i} has an empty slot {k} that can be hit"));
+                }
+            } else if !c.is_leaf() {
+                if c.node_index() >= b8.nodes.len() {
+                    return Err(format!("8-wide BVH node {i} has child {k} out of range"));
+                }
+                stack.push((c.node_index(), depth + 1));
+            } else {
+                let (len, m) = match c.kind() {
+                    LeafKind::Triangles => (b8.tris.len(), DefaultTriBlock::M),
+                    LeafKind::Spheres => (b8.spheres.len(), Sphere4::M),
+                };
+                let last = c.lanes_of_block(c.block_count().saturating_sub(1), m);
+                if c.block_count() == 0 || c.first_block() + c.block_count() > len || last == 0 || last > m {
+                    return Err(format!("8-wide BVH node {i} has leaf {k} out of range"));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Writes the scene's acceleration structures to `path` in `dir`, atomically.
+fn io(p: &Path) -> impl Fn(std::io::Error) -> CacheError + '_ {
+    move |source| CacheError::Io { path: p.to_path_buf(), source }
+}
+
+fn store(dir: &Path, path: &Path, key: CacheKey, scene: &Scene) -> Result<(), CacheError> {
+    static SERIAL: AtomicU64 = AtomicU64::new(0);
+    std::fs::create_dir_all(dir).map_err(io(dir))?;
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.tmp{}-{}", std::process::id(), SERIAL.fetch_add(1, Ordering::Relaxed)));
+    let mut w = SectionWriter::new();
+    let bounds = [scene.bounds];
+    w.push("bounds", &bounds);
+    w.push("bvh2.nodes", &scene.bvh2.nodes);
+    w.push("bvh2.prims", &scene.bvh2.prim_ids);
+    w.push("bvh8.nodes", &scene.bvh8.nodes);
+    w.push("bvh8.tris", &scene.bvh8.tris);
+    w.push("bvh8.spheres", &scene.bvh8.spheres);
+    let result = std::fs::File::create(&tmp)
+        .map_err(io(&tmp))
+        .and_then(|f| w.write_to(key, &mut std::io::BufWriter::with_capacity(1 << 20, f)).map_err(io(&tmp)))
+        .and_then(|_| std::fs::rename(&tmp, path).map_err(io(path)));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// The file name of the cache of `builder`'s geometry with `opts` inside `dir` (what
+/// [`SceneBuilder::commit_cached`] reads and writes); for tests and tools.
+pub fn cache_path(builder: &SceneBuilder, opts: &BuildOptions, dir: &Path) -> PathBuf {
+    let (kept, _) = builder.clone().filter();
+    CacheKey::of(&kept.triangles, &kept.spheres, opts).path_in(dir)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sections_round_trip_through_bytes() {
+        let a = [1u32, 2, 3];
+        let b = [Aabb::from_point(crate::Vec3::X)];
+        let mut w = SectionWriter::new();
+        w.push("a", &a);
+        w.push("b", &b);
+        let mut bytes = Vec::new();
+        let len = w.write_to(CacheKey(7), &mut bytes).unwrap();
+        assert_eq!(len as usize, bytes.len());
+        let f = CacheFile::check(Path::new("x"), &bytes, CacheKey(7)).unwrap();
+        assert_eq!(f.section::<u32>("a").unwrap(), a);
+        assert_eq!(f.section::<Aabb>("b").unwrap(), b);
+        assert!(matches!(f.section::<u64>("a"), Err(CacheError::Malformed { .. })));
+        assert!(matches!(f.section::<u32>("c"), Err(CacheError::Malformed { .. })));
+        assert!(matches!(CacheFile::check(Path::new("x"), &bytes, CacheKey(8)), Err(CacheError::Stale { .. })));
+        for i in 0..bytes.len() {
+            let mut bad = bytes.clone();
+            bad[i] ^= 0x10;
+            assert!(CacheFile::check(Path::new("x"), &bad, CacheKey(7)).is_err(), "flipped byte {i} accepted");
+        }
+    }
+}

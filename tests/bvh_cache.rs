@@ -1,0 +1,197 @@
+//! The BVH cache: a loaded scene traces exactly as a freshly built one, and every kind of bad
+//! cache file (truncated, one flipped byte, another format version, written for other options
+//! or other geometry) is rejected, rebuilt and overwritten with a valid file.
+
+use raypack::generate::{torus_knot, uv_sphere};
+use raypack::raysets::random_through_bounds;
+use raypack::scene::cache::{FORMAT_VERSION, cache_path};
+use raypack::{BuildOptions, BuildQuality, CacheError, Material, SceneBuilder, Vec3};
+use std::path::Path;
+
+fn builder() -> SceneBuilder {
+    let mut b = SceneBuilder::new();
+    let m = b.add_material(Material::default());
+    let knot = torus_knot(300, 12, 2.0, 3.0, 0.4, 0.05);
+    b.add_mesh(&knot.positions, &knot.indices, m).unwrap();
+    for i in 0..5 {
+        b.add_sphere(Vec3::new(i as f32 - 2.0, 0.0, 3.0), 0.3, m).unwrap();
+    }
+    b
+}
+
+fn other_builder() -> SceneBuilder {
+    let mut b = SceneBuilder::new();
+    let m = b.add_material(Material::default());
+    let s = uv_sphere(20, 30);
+    b.add_mesh(&s.positions, &s.indices, m).unwrap();
+    b
+}
+
+/// Commits through the cache and checks it traces as a fresh build does.
+fn commit_and_compare(dir: &Path, opts: &BuildOptions) -> raypack::CacheReport {
+    let (cached, _, report) = builder().commit_cached(opts, dir);
+    let (fresh, _) = builder().commit(opts);
+    assert_eq!(cached.bvh8().nodes, fresh.bvh8().nodes);
+    assert_eq!(cached.bvh8().tris, fresh.bvh8().tris);
+    assert_eq!(cached.bvh8().spheres, fresh.bvh8().spheres);
+    assert_eq!(cached.bvh2().nodes, fresh.bvh2().nodes);
+    assert_eq!(cached.bvh2().prim_ids, fresh.bvh2().prim_ids);
+    assert_eq!(cached.bounds(), fresh.bounds());
+    for r in random_through_bounds(&fresh.bounds(), 2000, 7) {
+        let (a, b) = (cached.intersect1(&r), fresh.intersect1(&r));
+        assert_eq!(
+            (a.prim, a.t.to_bits(), a.u.to_bits(), a.v.to_bits()),
+            (b.prim, b.t.to_bits(), b.u.to_bits(), b.v.to_bits())
+        );
+        assert_eq!(cached.occluded1(&r), fresh.occluded1(&r));
+        assert_eq!(cached.intersect1_reference(&r).t.to_bits(), a.t.to_bits());
+    }
+    report
+}
+
+#[test]
+fn round_trip_traces_like_a_fresh_build() {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = BuildOptions::default();
+    let first = commit_and_compare(dir.path(), &opts);
+    assert!(!first.loaded && first.rejected.is_none() && first.write_error.is_none(), "{first:?}");
+    assert!(first.path.exists());
+    let second = commit_and_compare(dir.path(), &opts);
+    assert!(second.loaded && second.warnings().is_empty(), "{second:?}");
+    assert_eq!(second.path, first.path);
+}
+
+/// Damages the cache file with `damage`, then expects the next commit to reject it with an
+/// error matching `expected`, rebuild it, and leave a file the commit after loads.
+fn rejected_then_rebuilt(damage: impl FnOnce(&Path), expected: fn(&CacheError) -> bool) {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = BuildOptions::default();
+    let path = commit_and_compare(dir.path(), &opts).path;
+    damage(&path);
+    let report = commit_and_compare(dir.path(), &opts);
+    assert!(!report.loaded, "damaged file trusted: {report:?}");
+    let e = report.rejected.as_ref().expect("damage not reported");
+    assert!(expected(e), "unexpected reason: {e}");
+    assert!(e.to_string().contains(&path.display().to_string()), "the message names the file: {e}");
+    assert_eq!(report.warnings().len(), 1);
+    let again = commit_and_compare(dir.path(), &opts);
+    assert!(again.loaded && again.warnings().is_empty(), "rebuilt file not valid: {again:?}");
+}
+
+#[test]
+fn truncated_file_is_rejected_and_rebuilt() {
+    for keep in [0.5, 0.999] {
+        rejected_then_rebuilt(
+            |p| {
+                let bytes = std::fs::read(p).unwrap();
+                std::fs::write(p, &bytes[..(bytes.len() as f64 * keep) as usize]).unwrap();
+            },
+            |e| matches!(e, CacheError::Truncated { .. }),
+        );
+    }
+    rejected_then_rebuilt(|p| std::fs::write(p, b"RPKB").unwrap(), |e| matches!(e, CacheError::Truncated { .. }));
+    rejected_then_rebuilt(|p| std::fs::write(p, b"").unwrap(), |e| matches!(e, CacheError::Truncated { .. }));
+}
+
+#[test]
+fn one_flipped_payload_byte_is_rejected_and_rebuilt() {
+    for at in [0.3, 0.77, 1.0] {
+        rejected_then_rebuilt(
+            |p| {
+                let mut bytes = std::fs::read(p).unwrap();
+                let i = ((bytes.len() - 1) as f64 * at) as usize;
+                bytes[i] ^= 0x01;
+                std::fs::write(p, &bytes).unwrap();
+            },
+            |e| matches!(e, CacheError::Checksum { .. }),
+        );
+    }
+}
+
+#[test]
+fn other_format_version_is_rejected_and_rebuilt() {
+    rejected_then_rebuilt(
+        |p| {
+            let mut bytes = std::fs::read(p).unwrap();
+            bytes[8..12].copy_from_slice(&(FORMAT_VERSION + 1).to_le_bytes());
+            std::fs::write(p, &bytes).unwrap();
+        },
+        |e| matches!(e, CacheError::Version { found, .. } if *found == FORMAT_VERSION + 1),
+    );
+    rejected_then_rebuilt(
+        |p| {
+            let mut bytes = std::fs::read(p).unwrap();
+            bytes[0] = b'X';
+            std::fs::write(p, &bytes).unwrap();
+        },
+        |e| matches!(e, CacheError::BadMagic { .. }),
+    );
+}
+
+#[test]
+fn file_for_other_options_or_geometry_is_rejected_and_rebuilt() {
+    let high = BuildOptions { quality: BuildQuality::High, ..BuildOptions::default() };
+    let leaf2 = BuildOptions { max_leaf_size: 2, ..BuildOptions::default() };
+    assert_ne!(
+        cache_path(&builder(), &high, Path::new("d")),
+        cache_path(&builder(), &BuildOptions::default(), Path::new("d"))
+    );
+    for (b, opts) in [(builder(), high), (builder(), leaf2), (other_builder(), BuildOptions::default())] {
+        rejected_then_rebuilt(
+            |p| {
+                // A valid cache file, but of other options or geometry, put where this one goes.
+                let dir = p.parent().unwrap().join("other");
+                let (_, _, r) = b.commit_cached(&opts, &dir);
+                assert!(r.path.exists() && r.path.file_name() != p.file_name());
+                std::fs::rename(&r.path, p).unwrap();
+            },
+            |e| matches!(e, CacheError::Stale { .. }),
+        );
+    }
+}
+
+#[test]
+fn dropped_primitives_are_not_part_of_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let with_bad = || {
+        let mut b = builder();
+        let m = 0;
+        b.add_mesh(&[Vec3::ZERO, Vec3::ZERO, Vec3::X], &[[0, 1, 2]], m).unwrap(); // zero area
+        b
+    };
+    let opts = BuildOptions::default();
+    // The kept geometry differs from builder()'s only by three vertices no triangle uses.
+    let (_, report, first) = with_bad().commit_cached(&opts, dir.path());
+    assert_eq!(report.dropped_degenerate, 1);
+    let (_, _, second) = with_bad().commit_cached(&opts, dir.path());
+    assert!(!first.loaded && second.loaded);
+}
+
+#[test]
+fn unwritable_cache_dir_is_a_warning_not_a_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    // A regular file where the directory should be: nothing can be created inside it,
+    // whatever the user's permissions (root included).
+    let blocker = dir.path().join("not-a-dir");
+    std::fs::write(&blocker, b"x").unwrap();
+    let (scene, _, report) = builder().commit_cached(&BuildOptions::default(), &blocker.join("cache"));
+    assert!(!report.loaded);
+    let e = report.write_error.as_ref().expect("write failure reported");
+    assert!(matches!(e, CacheError::Io { .. }), "{e}");
+    assert!(report.warnings()[0].contains("not-a-dir"), "{:?}", report.warnings());
+    let (fresh, _) = builder().commit(&BuildOptions::default());
+    assert_eq!(scene.bvh8().nodes, fresh.bvh8().nodes);
+
+    // A read-only directory (meaningful when not root: root writes anyway).
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let ro = dir.path().join("ro");
+        std::fs::create_dir(&ro).unwrap();
+        std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o555)).unwrap();
+        let (_, _, report) = builder().commit_cached(&BuildOptions::default(), &ro);
+        assert!(!report.loaded);
+        assert!(report.write_error.is_some() || report.path.exists(), "{report:?}");
+        std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o755)).unwrap();
+    }
+}
