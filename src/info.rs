@@ -40,7 +40,8 @@ pub struct BuildInfo {
     pub seconds: f64,
     /// True when the structures came from the BVH cache.
     pub from_cache: bool,
-    /// Cache problems (rejected file, failed write), one line each.
+    /// Cache problems (rejected file, failed write), one line each; `raypack info` prints
+    /// them on stderr.
     pub cache_warnings: Vec<String>,
     /// Statistics of the binary BVH.
     pub bvh2: BvhStats,
@@ -217,9 +218,6 @@ impl SceneInfo {
         for bi in &self.builds {
             let how = if bi.from_cache { "loaded from the BVH cache" } else { "built" };
             let _ = writeln!(s, "{:<12} {:.4} s, {how}", format!("build {}", quality_name(bi.quality)), bi.seconds);
-            for w in &bi.cache_warnings {
-                let _ = writeln!(s, "  warning    {w}");
-            }
             let _ = writeln!(s, "  bvh2       {}", bi.bvh2);
             let _ = writeln!(s, "  bvh8       {}", bi.bvh8);
             let _ = writeln!(

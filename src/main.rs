@@ -401,6 +401,9 @@ fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
         .map_err(|e| CliError::Usage(e.to_string()))?;
     let info = pool.install(|| scene_info(&a.scene, &opts))?;
     print_warnings(&info.warnings);
+    for w in info.builds.iter().flat_map(|b| &b.cache_warnings) {
+        eprintln!("[raypack] warning: {w}");
+    }
     if a.json {
         println!("{:#}", info.json());
     } else {

@@ -27,14 +27,19 @@ fn other_builder() -> SceneBuilder {
     b
 }
 
+fn bytes<T: bytemuck::Pod>(v: &[T]) -> &[u8] {
+    bytemuck::cast_slice(v)
+}
+
 /// Commits through the cache and checks it traces as a fresh build does.
 fn commit_and_compare(dir: &Path, opts: &BuildOptions) -> raypack::CacheReport {
     let (cached, _, report) = builder().commit_cached(opts, dir);
     let (fresh, _) = builder().commit(opts);
-    assert_eq!(cached.bvh8().nodes, fresh.bvh8().nodes);
-    assert_eq!(cached.bvh8().tris, fresh.bvh8().tris);
-    assert_eq!(cached.bvh8().spheres, fresh.bvh8().spheres);
-    assert_eq!(cached.bvh2().nodes, fresh.bvh2().nodes);
+    // Bit for bit (padding lanes hold NaN, which `==` would not equal).
+    assert!(bytes(&cached.bvh8().nodes) == bytes(&fresh.bvh8().nodes));
+    assert!(bytes(&cached.bvh8().tris) == bytes(&fresh.bvh8().tris));
+    assert!(bytes(&cached.bvh8().spheres) == bytes(&fresh.bvh8().spheres));
+    assert!(bytes(&cached.bvh2().nodes) == bytes(&fresh.bvh2().nodes));
     assert_eq!(cached.bvh2().prim_ids, fresh.bvh2().prim_ids);
     assert_eq!(cached.bounds(), fresh.bounds());
     for r in random_through_bounds(&fresh.bounds(), 2000, 7) {
@@ -180,7 +185,7 @@ fn unwritable_cache_dir_is_a_warning_not_a_panic() {
     assert!(matches!(e, CacheError::Io { .. }), "{e}");
     assert!(report.warnings()[0].contains("not-a-dir"), "{:?}", report.warnings());
     let (fresh, _) = builder().commit(&BuildOptions::default());
-    assert_eq!(scene.bvh8().nodes, fresh.bvh8().nodes);
+    assert!(bytes(&scene.bvh8().nodes) == bytes(&fresh.bvh8().nodes));
 
     // A read-only directory (meaningful when not root: root writes anyway).
     #[cfg(unix)]
@@ -194,4 +199,49 @@ fn unwritable_cache_dir_is_a_warning_not_a_panic() {
         assert!(report.write_error.is_some() || report.path.exists(), "{report:?}");
         std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o755)).unwrap();
     }
+}
+
+/// The CLI: `info` and `render` share the cache; a damaged file is reported once on stderr
+/// and rebuilt.
+#[test]
+fn cli_reports_loads_and_rebuilds() {
+    let dir = tempfile::tempdir().unwrap();
+    let knot = torus_knot(60, 8, 2.0, 3.0, 0.4, 0.05);
+    let mut obj = String::new();
+    for p in &knot.positions {
+        obj += &format!("v {} {} {}\n", p.x, p.y, p.z);
+    }
+    for [a, b, c] in &knot.indices {
+        obj += &format!("f {} {} {}\n", a + 1, b + 1, c + 1);
+    }
+    let scene = dir.path().join("knot.obj");
+    std::fs::write(&scene, obj).unwrap();
+    let cache = dir.path().join("cache");
+    let run = |args: &[&str]| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_raypack")).args(args).output().expect("runs");
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        (String::from_utf8(out.stdout).unwrap(), String::from_utf8(out.stderr).unwrap())
+    };
+    let (s, c) = (scene.to_str().unwrap(), cache.to_str().unwrap());
+    let info = |args: &[&str]| {
+        let (out, err) = run(&[&["info", s, "--quality", "medium", "--json", "--bvh-cache", c], args].concat());
+        let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+        assert_eq!(v["triangles"], knot.indices.len());
+        (v["builds"][0]["from_cache"].as_bool().unwrap(), err)
+    };
+    assert_eq!(info(&[]).0, false);
+    assert_eq!(info(&["-t", "1"]).0, true);
+    let file = std::fs::read_dir(&cache).unwrap().next().unwrap().unwrap().path();
+    let mut bytes = std::fs::read(&file).unwrap();
+    let n = bytes.len();
+    bytes[n / 2] ^= 0x80;
+    std::fs::write(&file, &bytes).unwrap();
+    let (loaded, err) = info(&[]);
+    assert!(!loaded);
+    assert_eq!(err.matches("checksum mismatch").count(), 1, "{err}");
+    let png = dir.path().join("k.png");
+    let (_, err) =
+        run(&["render", s, "-r", "32", "24", "--integrator", "normals", "--bvh-cache", c, "-f", png.to_str().unwrap()]);
+    assert!(err.contains("Loaded BVH") && !err.contains("warning: BVH cache"), "{err}");
+    assert!(png.exists());
 }

@@ -571,6 +571,47 @@ pub fn cache_path(builder: &SceneBuilder, opts: &BuildOptions, dir: &Path) -> Pa
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bvh::node::NodeRef;
+
+    /// A file whose checksum and key are right but whose trees are not what a build makes
+    /// (only a forged file) is still rejected before a query could index out of range.
+    #[test]
+    fn forged_trees_are_rejected() {
+        use crate::{Material, SceneBuilder};
+        let dir = std::env::temp_dir().join(format!("raypack-forged-{}", std::process::id()));
+        let make = || {
+            let mut b = SceneBuilder::new();
+            let m = b.add_material(Material::default());
+            let s = crate::generate::grid(2, 2);
+            b.add_mesh(&s.positions, &s.indices, m).unwrap();
+            b.add_sphere(crate::Vec3::Z, 0.5, m).unwrap();
+            b
+        };
+        let opts = BuildOptions::default();
+        let (scene, _, report) = make().commit_cached(&opts, &dir);
+        let key = CacheKey::of(&scene.triangles, &scene.spheres, &opts);
+        let forge = |what: &str, edit: &dyn Fn(&mut Scene)| {
+            let (mut s, _) = make().commit(&opts);
+            edit(&mut s);
+            store(&dir, &report.path, key, &s).unwrap();
+            let (_, _, r) = make().commit_cached(&opts, &dir);
+            assert!(matches!(r.rejected, Some(CacheError::Malformed { .. })), "{what}: {r:?}");
+        };
+        forge("1", &|s| s.bvh8.nodes[0].children[0] = NodeRef::inner(1 << 30));
+        forge("2", &|s| s.bvh8.nodes[0].children[1] = NodeRef::inner(0));
+        forge("3", &|s| {
+            // An empty slot whose box can be hit: the kernels would follow its reference.
+            let (i, k) = (0..s.bvh8.nodes.len())
+                .find_map(|i| s.bvh8.nodes[i].children.iter().position(|c| c.is_empty()).map(|k| (i, k)))
+                .expect("a node with an empty slot");
+            s.bvh8.nodes[i].set_child(k, &Aabb::from_point(crate::Vec3::ZERO), NodeRef::EMPTY);
+        });
+        forge("4", &|s| s.bvh8.tris.clear());
+        forge("5", &|s| s.bvh8.tris[0].prim[0] = 1 << 20);
+        forge("6", &|s| s.bvh2.nodes[0].start = 1 << 30);
+        forge("7", &|s| s.bvh2.prim_ids[0] = 1 << 20);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn sections_round_trip_through_bytes() {
