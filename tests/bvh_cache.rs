@@ -245,3 +245,26 @@ fn cli_reports_loads_and_rebuilds() {
     assert!(err.contains("Loaded BVH") && !err.contains("warning: BVH cache"), "{err}");
     assert!(png.exists());
 }
+
+#[test]
+fn empty_and_sphere_only_scenes_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = BuildOptions::default();
+    let spheres = || {
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::default());
+        for i in 0..40 {
+            b.add_sphere(Vec3::new(i as f32, (i % 7) as f32, 0.0), 0.4, m).unwrap();
+        }
+        b
+    };
+    for make in [SceneBuilder::new as fn() -> SceneBuilder, spheres] {
+        let (fresh, _) = make().commit(&opts);
+        let (_, _, first) = make().commit_cached(&opts, dir.path());
+        let (cached, _, second) = make().commit_cached(&opts, dir.path());
+        assert!(!first.loaded && second.loaded && second.warnings().is_empty(), "{second:?}");
+        for r in random_through_bounds(&spheres().commit(&opts).0.bounds(), 500, 3) {
+            assert_eq!(cached.intersect1(&r).t.to_bits(), fresh.intersect1(&r).t.to_bits());
+        }
+    }
+}

@@ -415,7 +415,13 @@ impl<'a> CacheFile<'a> {
         if size == 0 {
             return Ok(Vec::new());
         }
-        Ok(bytemuck::pod_collect_to_vec(&self.bytes[range]))
+        let bytes = &self.bytes[range];
+        // Sections start on 64-byte boundaries of a page-aligned mapping, so the cast succeeds
+        // and `to_vec` copies without first zeroing; the fallback handles any alignment.
+        Ok(match bytemuck::try_cast_slice::<u8, T>(bytes) {
+            Ok(items) => items.to_vec(),
+            Err(_) => bytemuck::pod_collect_to_vec(bytes),
+        })
     }
 }
 
@@ -436,7 +442,8 @@ fn load(path: &Path, key: CacheKey, num_prims: usize) -> Result<Option<Accel>, C
     // renames a new file over it, which leaves this mapping's inode intact). Another process
     // truncating the file while it is mapped could raise SIGBUS, the accepted risk of every
     // memory-mapped reader; bytes changed under us are caught by the checksum or the checks.
-    let map = unsafe { memmap2::Mmap::map(&file) }.map_err(io(path))?;
+    // `populate` reads the whole file ahead (MAP_POPULATE) instead of faulting page by page.
+    let map = unsafe { memmap2::MmapOptions::new().populate().map(&file) }.map_err(io(path))?;
     let file = CacheFile::check(path, &map, key)?;
     let accel = read_accel(&file)?;
     check_accel(&accel, num_prims).map_err(|what| CacheError::Malformed { path: path.to_path_buf(), what })?;
@@ -462,32 +469,40 @@ fn read_accel(f: &CacheFile) -> Result<Accel, CacheError> {
 
 /// The ranges the traversal kernels index with: every child, block and primitive reference
 /// in range, each node reached once, depth at most [`MAX_DEPTH`], empty slots never hit.
+///
+/// Both builders store children after their parent (depth-first order), which this requires:
+/// one pass in index order then sees each node's depth before its children's, so the check
+/// is linear and cache-friendly (a depth-first walk with a stack took 11% of a cached start).
 fn check_accel(a: &Accel, num_prims: usize) -> Result<(), String> {
     let n2 = &a.bvh2.nodes;
     if n2.is_empty() {
         return Err("binary BVH without a root".into());
     }
-    if a.bvh2.prim_ids.iter().any(|&p| p as usize >= num_prims) {
+    if !a.bvh2.prim_ids.iter().all(|&p| (p as usize) < num_prims) {
         return Err("binary BVH refers to a primitive that does not exist".into());
     }
-    let mut reached = vec![false; n2.len()];
-    let mut stack = vec![(0usize, 1usize)];
-    while let Some((i, depth)) = stack.pop() {
-        if std::mem::replace(&mut reached[i], true) || depth > MAX_DEPTH {
-            return Err(format!("binary BVH node {i} reached twice or deeper than {MAX_DEPTH}"));
+    // depth[i]: 0 while node i is unreached, else its depth (root = 1). An empty tree is a
+    // root with `count == 0` that the traversal never enters.
+    let mut depth = vec![0u8; n2.len()];
+    depth[0] = u8::from(!a.bvh2.prim_ids.is_empty());
+    for (i, n) in n2.iter().enumerate() {
+        let d = depth[i];
+        if d == 0 {
+            continue;
         }
-        let n = &n2[i];
         let (start, count) = (n.start as usize, n.count as usize);
         if n.is_leaf() {
             if start + count > a.bvh2.prim_ids.len() {
                 return Err(format!("binary BVH leaf {i} out of range"));
             }
-        } else if a.bvh2.prim_ids.is_empty() {
-            return Err("empty binary BVH with an inner root".into());
-        } else if start + 1 >= n2.len() {
-            return Err(format!("binary BVH node {i} has children out of range"));
+        } else if start <= i || start + 1 >= n2.len() || d as usize >= MAX_DEPTH {
+            return Err(format!("binary BVH node {i} has children out of range or too deep"));
         } else {
-            stack.extend([(start, depth + 1), (start + 1, depth + 1)]);
+            for c in [start, start + 1] {
+                if std::mem::replace(&mut depth[c], d + 1) != 0 {
+                    return Err(format!("binary BVH node {c} reached twice"));
+                }
+            }
         }
     }
 
@@ -496,28 +511,31 @@ fn check_accel(a: &Accel, num_prims: usize) -> Result<(), String> {
         return Err("8-wide BVH without a root".into());
     }
     let prim_ok = |p: u32| p == u32::MAX || (p as usize) < num_prims;
-    if !b8.tris.iter().all(|b| (0..DefaultTriBlock::M).all(|l| prim_ok(b.prim(l))))
+    if !b8.tris.iter().all(|b| b.prim.iter().all(|&p| prim_ok(p)))
         || !b8.spheres.iter().all(|b| b.prim.iter().all(|&p| prim_ok(p)))
     {
         return Err("8-wide BVH block refers to a primitive that does not exist".into());
     }
-    let mut reached = vec![false; b8.nodes.len()];
-    let mut stack = vec![(0usize, 1usize)];
-    while let Some((i, depth)) = stack.pop() {
-        if std::mem::replace(&mut reached[i], true) || depth > MAX_DEPTH {
-            return Err(format!("8-wide BVH node {i} reached twice or deeper than {MAX_DEPTH}"));
+    let mut depth = vec![0u8; b8.nodes.len()];
+    depth[0] = 1;
+    for (i, n) in b8.nodes.iter().enumerate() {
+        let d = depth[i];
+        if d == 0 {
+            continue;
         }
-        let n = &b8.nodes[i];
         for (k, &c) in n.children.iter().enumerate() {
             if c.is_empty() {
                 if n.child_bounds(k) != Aabb::EMPTY {
                     return Err(format!("8-wide BVH node {i} has an empty slot {k} that can be hit"));
                 }
             } else if !c.is_leaf() {
-                if c.node_index() >= b8.nodes.len() {
-                    return Err(format!("8-wide BVH node {i} has child {k} out of range"));
+                let j = c.node_index();
+                if j <= i || j >= b8.nodes.len() || d as usize >= MAX_DEPTH {
+                    return Err(format!("8-wide BVH node {i} has child {k} out of range or too deep"));
                 }
-                stack.push((c.node_index(), depth + 1));
+                if std::mem::replace(&mut depth[j], d + 1) != 0 {
+                    return Err(format!("8-wide BVH node {j} reached twice"));
+                }
             } else {
                 let (len, m) = match c.kind() {
                     LeafKind::Triangles => (b8.tris.len(), DefaultTriBlock::M),
@@ -533,7 +551,6 @@ fn check_accel(a: &Accel, num_prims: usize) -> Result<(), String> {
     Ok(())
 }
 
-/// Writes the scene's acceleration structures to `path` in `dir`, atomically.
 fn io(p: &Path) -> impl Fn(std::io::Error) -> CacheError + '_ {
     move |source| CacheError::Io { path: p.to_path_buf(), source }
 }
