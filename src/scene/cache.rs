@@ -21,8 +21,8 @@
 //! | then | the sections, each a plain array of `bytemuck::Pod` elements starting on a 64-byte boundary |
 //!
 //! Sections are looked up by name and element size, so a new leaf block type (for example
-//! watertight triangle blocks) is one more `Pod` array: a name, a [`SectionWriter::push`] and
-//! a [`CacheFile::section`] call.
+//! watertight triangle blocks) is one more `Pod` array: a name, a `SectionWriter::push` in
+//! `store` and a `CacheFile::section` call in `read_accel`.
 
 use crate::bvh::{BuildOptions, Bvh2, Bvh2Node, Bvh8, Bvh8Node, DefaultTriBlock, LeafKind, MAX_DEPTH};
 use crate::geometry::{Sphere4, Tri8, TriBlock};
@@ -278,7 +278,7 @@ fn section_name(name: &str) -> [u8; 12] {
 }
 
 /// Collects `Pod` arrays and writes them as one cache file.
-pub struct SectionWriter<'a> {
+pub(crate) struct SectionWriter<'a> {
     entries: Vec<SectionEntry>,
     data: Vec<&'a [u8]>,
 }
@@ -289,7 +289,7 @@ impl<'a> SectionWriter<'a> {
     }
 
     /// Adds the array `items` under `name` (at most 12 ASCII bytes).
-    pub fn push<T: bytemuck::Pod>(&mut self, name: &str, items: &'a [T]) {
+    pub(crate) fn push<T: bytemuck::Pod>(&mut self, name: &str, items: &'a [T]) {
         self.entries.push(SectionEntry {
             name: section_name(name),
             elem_size: std::mem::size_of::<T>() as u32,
@@ -345,7 +345,7 @@ impl<'a> SectionWriter<'a> {
 }
 
 /// A cache file mapped into memory whose header, length and checksum have been checked.
-pub struct CacheFile<'a> {
+pub(crate) struct CacheFile<'a> {
     path: &'a Path,
     bytes: &'a [u8],
     entries: Vec<SectionEntry>,
@@ -396,7 +396,7 @@ impl<'a> CacheFile<'a> {
     }
 
     /// Copies out section `name`, checking its element size and extent.
-    pub fn section<T: bytemuck::Pod>(&self, name: &str) -> Result<Vec<T>, CacheError> {
+    pub(crate) fn section<T: bytemuck::Pod>(&self, name: &str) -> Result<Vec<T>, CacheError> {
         let malformed = |what: String| CacheError::Malformed { path: self.path.to_path_buf(), what };
         let wanted = section_name(name);
         let e =
