@@ -57,6 +57,10 @@ struct BenchArgs {
     /// Load the BVH from (or save it to) a cache file in this directory.
     #[arg(long, value_name = "DIR")]
     bvh_cache: Option<PathBuf>,
+    /// Use the watertight triangle test (no ray slips through shared edges) instead of
+    /// Möller–Trumbore.
+    #[arg(long)]
+    watertight: bool,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -137,6 +141,10 @@ struct RenderArgs {
     /// Load the BVH from (or save it to) a cache file in this directory.
     #[arg(long, value_name = "DIR")]
     bvh_cache: Option<PathBuf>,
+    /// Use the watertight triangle test (no ray slips through shared edges) instead of
+    /// Möller–Trumbore.
+    #[arg(long)]
+    watertight: bool,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -293,7 +301,7 @@ fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         let load_time = t.elapsed().as_secs_f64();
         eprintln!("Done! ({load_time:.4} sec)");
         print_warnings(&warnings);
-        let opts = BuildOptions { quality: a.quality.into(), ..BuildOptions::default() };
+        let opts = BuildOptions { quality: a.quality.into(), watertight: a.watertight, ..BuildOptions::default() };
         let t = Instant::now();
         let scene = commit(builder, &opts, a.bvh_cache.as_deref());
         let setup_time = [("load", load_time), ("BVH build", t.elapsed().as_secs_f64())];
@@ -433,7 +441,7 @@ fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     print_warnings(&warnings);
     let quality: BuildQuality = a.quality.into();
     let t = Instant::now();
-    let opts = BuildOptions { quality, ..BuildOptions::default() };
+    let opts = BuildOptions { quality, watertight: a.watertight, ..BuildOptions::default() };
     let (scene, report) = match a.bvh_cache.as_deref() {
         None => builder.commit(&opts),
         Some(dir) => {
@@ -453,7 +461,7 @@ fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     }
     let build = BuildFigures {
         tracer: "raypack",
-        quality: format!("bvh8 {}", format!("{quality:?}").to_lowercase()),
+        quality: format!("bvh8 {} {}", format!("{quality:?}").to_lowercase(), scene.triangle_test().name()),
         seconds,
         bytes: raypack_accel_bytes(&scene) as u64,
     };

@@ -131,12 +131,44 @@ fn sah_beats_median_split() {
 
 #[test]
 fn build_is_identical_whatever_the_thread_count() {
-    let mesh = random_soup(200_000, 0.01, 21);
-    let build = |threads| {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-        pool.install(|| scene_of(&[&mesh], &[], &BuildOptions::default()))
-    };
-    let (a, b) = (build(1), build(2));
-    assert_eq!(a.bvh2().prim_ids, b.bvh2().prim_ids);
-    assert_eq!(a.bvh2().nodes, b.bvh2().nodes);
+    // The BVH2 and the BVH8 arrays (nodes, triangle and sphere blocks), bit for bit, built in a
+    // rayon pool of 1 and of 2 threads, for both block layouts. (The image part of determinism
+    // is in tests/render_cli.rs.)
+    let mut mesh = random_soup(200_000, 0.01, 21);
+    mesh.append(&uv_sphere(60, 120));
+    let spheres: Vec<(Vec3, f32)> = (0..300).map(|i| (Vec3::new(i as f32 * 0.006 - 0.9, 0.1, -0.2), 0.01)).collect();
+    for watertight in [false, true] {
+        let opts = BuildOptions { watertight, ..BuildOptions::default() };
+        let build = |threads| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| scene_of(&[&mesh], &spheres, &opts))
+        };
+        let (a, b) = (build(1), build(2));
+        assert_eq!(a.bvh2().prim_ids, b.bvh2().prim_ids);
+        assert_eq!(a.bvh2().nodes, b.bvh2().nodes);
+        assert_eq!(bvh8_bits(&a), bvh8_bits(&b), "BVH8 differs between 1 and 2 threads (watertight {watertight})");
+        assert!(a.bvh8().tris.len() > 10_000 && !a.bvh8().spheres.is_empty());
+    }
+}
+
+/// Every bit of a scene's BVH8: node boxes and references, block rows and ids.
+fn bvh8_bits(scene: &Scene) -> Vec<u64> {
+    use raypack::geometry::TriBlock;
+    let bvh = scene.bvh8();
+    let mut out = vec![bvh.nodes.len() as u64, bvh.tris.len() as u64, bvh.spheres.len() as u64];
+    for n in &bvh.nodes {
+        out.extend(n.bounds.iter().flatten().map(|x| x.to_bits() as u64));
+        out.extend(n.children.iter().map(|c| c.0));
+    }
+    for b in &bvh.tris {
+        for lane in 0..raypack::geometry::Tri8::M {
+            out.extend(b.lane_rows(lane).iter().flat_map(|v| v.to_array()).map(|x| x.to_bits() as u64));
+            out.push(b.prim(lane) as u64);
+        }
+    }
+    for s in &bvh.spheres {
+        out.extend(s.center.iter().flatten().chain(&s.radius).map(|x| x.to_bits() as u64));
+        out.extend(s.prim.iter().map(|&p| p as u64));
+    }
+    out
 }

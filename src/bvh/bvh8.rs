@@ -1,7 +1,7 @@
 //! The 8-wide BVH: nodes, triangle blocks and sphere blocks in flat arrays.
 
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
-use crate::geometry::{Sphere4, Tri8, TriBlock};
+use crate::geometry::{Sphere4, Tri8, TriBlock, TriangleTest};
 
 /// The triangle block the scene uses: M = 8.
 ///
@@ -33,11 +33,14 @@ pub struct Bvh8<T = DefaultTriBlock> {
     pub tris: Vec<T>,
     /// Sphere blocks.
     pub spheres: Vec<Sphere4>,
+    /// The triangle test the blocks are laid out for (the kernels dispatch on it once per
+    /// query).
+    pub test: TriangleTest,
 }
 
 impl<T: TriBlock> Default for Bvh8<T> {
     fn default() -> Self {
-        Self { nodes: vec![Bvh8Node::EMPTY], tris: Vec::new(), spheres: Vec::new() }
+        Self { nodes: vec![Bvh8Node::EMPTY], tris: Vec::new(), spheres: Vec::new(), test: TriangleTest::default() }
     }
 }
 

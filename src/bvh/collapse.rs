@@ -25,7 +25,7 @@
 use crate::bvh::build_sah::pad_outward;
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
 use crate::bvh::{Bvh2, Bvh8};
-use crate::geometry::{Sphere4, TriBlock};
+use crate::geometry::{Sphere4, TriBlock, TriangleTest};
 use crate::math::{Aabb, Vec3};
 
 /// The shape of one primitive, as the collapse needs it to fill leaf blocks.
@@ -322,7 +322,7 @@ impl<T: TriBlock, S: Fn(u32) -> PrimShape> Emitter<'_, T, S> {
                 let mut b = T::EMPTY;
                 for (lane, &id) in chunk.iter().enumerate() {
                     let PrimShape::Triangle([a, bb, cc]) = (self.shape)(id) else { unreachable!("triangle leaf") };
-                    b.set(lane, a, bb, cc, id);
+                    b.set_for(self.out.test, lane, a, bb, cc, id);
                 }
                 self.out.tris.push(b);
             }
@@ -373,11 +373,21 @@ impl<T: TriBlock, S: Fn(u32) -> PrimShape> Emitter<'_, T, S> {
     }
 }
 
-/// Collapses `bvh2` into an 8-wide BVH with leaf blocks of `T`. `shape(id)` gives the
-/// geometry of primitive `id`.
+/// Collapses `bvh2` into an 8-wide BVH with leaf blocks of `T` laid out for
+/// Möller–Trumbore. `shape(id)` gives the geometry of primitive `id`.
 pub fn collapse<T: TriBlock>(bvh2: &Bvh2, shape: impl Fn(u32) -> PrimShape + Sync, opts: &CollapseOptions) -> Bvh8<T> {
+    collapse_for(bvh2, shape, opts, TriangleTest::MollerTrumbore)
+}
+
+/// [`collapse()`] with leaf blocks laid out for triangle test `test`.
+pub fn collapse_for<T: TriBlock>(
+    bvh2: &Bvh2,
+    shape: impl Fn(u32) -> PrimShape + Sync,
+    opts: &CollapseOptions,
+    test: TriangleTest,
+) -> Bvh8<T> {
     let tree = binary_tree(bvh2, &shape);
-    let out = Bvh8 { nodes: vec![Bvh8Node::EMPTY], tris: Vec::new(), spheres: Vec::new() };
+    let out = Bvh8 { nodes: vec![Bvh8Node::EMPTY], tris: Vec::new(), spheres: Vec::new(), test };
     if tree.nodes.is_empty() {
         return out;
     }

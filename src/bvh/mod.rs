@@ -21,7 +21,7 @@ pub mod validate;
 pub use build_sah::{BuildOptions, BuildPrim, BuildQuality, SplitMethod, build_bvh2};
 pub use bvh2::{Bvh2, Bvh2Node};
 pub use bvh8::{Bvh8, Bvh8Stats, DefaultTriBlock};
-pub use collapse::{CollapseMethod, CollapseOptions, PrimShape, collapse};
+pub use collapse::{CollapseMethod, CollapseOptions, PrimShape, collapse, collapse_for};
 pub use node::{Bvh8Node, LeafKind, NodeRef};
 pub use stats::BvhStats;
 

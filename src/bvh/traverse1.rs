@@ -20,14 +20,15 @@
 //! tables without narrowing the child references.
 //!
 //! Leaves are runs of SoA blocks tested one ray against all M triangles at once
-//! ([`crate::geometry::tri_block`]).
+//! ([`crate::geometry::tri_block`]) with the BVH's [`TriangleKernel`] (Möller–Trumbore or
+//! watertight), chosen once per query.
 
 use crate::bvh::bvh2::SLAB_WIDEN;
 use crate::bvh::counters::*;
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
 use crate::bvh::{BVH8_STACK, Bvh8};
-use crate::geometry::TriBlock;
 use crate::geometry::sphere_block::sphere_lanes;
+use crate::geometry::{MollerTrumboreKernel, TriBlock, TriangleKernel, TriangleTest, WatertightKernel};
 use crate::ray::{Hit, Ray};
 use crate::simd::{F32x4, F32x8, Lanes, Vec3x};
 use std::mem::MaybeUninit;
@@ -112,20 +113,27 @@ impl<T: TriBlock> Bvh8<T> {
         let mut hit = Hit::MISS;
         if ray.is_valid() {
             let mut tfar = ray.tfar;
-            self.intersect1_from(&Ray1::new(ray), self.root(), &mut tfar, &mut hit);
+            let (r, root) = (Ray1::new(ray), self.root());
+            match self.test {
+                TriangleTest::MollerTrumbore => {
+                    self.intersect1_from::<MollerTrumboreKernel>(&r, root, &mut tfar, &mut hit)
+                }
+                TriangleTest::Watertight => self.intersect1_from::<WatertightKernel>(&r, root, &mut tfar, &mut hit),
+            }
         }
         hit
     }
 
     /// Closest-hit traversal of the subtree `start`, shrinking `tfar` and updating `hit` as
     /// closer hits are found (the single-ray fallback of the packet kernels enters here).
+    /// `K` must be the kernel of `self.test`.
     #[inline]
-    pub fn intersect1_from(&self, r: &Ray1, start: NodeRef, tfar_io: &mut f32, hit_io: &mut Hit) {
+    pub fn intersect1_from<K: TriangleKernel>(&self, r: &Ray1, start: NodeRef, tfar_io: &mut f32, hit_io: &mut Hit) {
+        debug_assert_eq!(K::TEST, self.test, "kernel of the block layout");
         let mut refs = [const { MaybeUninit::<NodeRef>::uninit() }; BVH8_STACK];
         let mut dists = [const { MaybeUninit::<f32>::uninit() }; BVH8_STACK];
         let mut sp = 0usize;
-        let org = Vec3x::<T::V>::splat(r.ray.origin);
-        let dir = Vec3x::<T::V>::splat(r.ray.dir);
+        let pre = K::ray1::<T::V>(&r.ray);
         let tnear = T::V::splat(r.ray.tnear);
         let mut tfar = *tfar_io;
         let mut hit = *hit_io;
@@ -196,7 +204,7 @@ impl<T: TriBlock> Bvh8<T> {
                     // SAFETY: entry sp was written above.
                     cur = unsafe { refs[sp].assume_init() };
                 }
-                self.intersect_leaf(cur, r, &org, &dir, tnear, &mut tfar, &mut hit);
+                self.intersect_leaf::<K>(cur, r, &pre, tnear, &mut tfar, &mut hit);
             }
             loop {
                 if sp == 0 {
@@ -216,13 +224,11 @@ impl<T: TriBlock> Bvh8<T> {
     }
 
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
-    fn intersect_leaf(
+    fn intersect_leaf<K: TriangleKernel>(
         &self,
         leaf: NodeRef,
         r: &Ray1,
-        org: &Vec3x<T::V>,
-        dir: &Vec3x<T::V>,
+        pre: &K::Ray1<T::V>,
         tnear: T::V,
         tfar: &mut f32,
         hit: &mut Hit,
@@ -233,7 +239,7 @@ impl<T: TriBlock> Bvh8<T> {
         match leaf.kind() {
             LeafKind::Triangles => {
                 for block in &self.tris[range] {
-                    let h = block.intersect1(org, dir, tnear, T::V::splat(*tfar));
+                    let h = K::block(block, pre, tnear, T::V::splat(*tfar));
                     if let Some(lane) = h.closest() {
                         *tfar = h.t.lane(lane);
                         *hit = Hit { t: *tfar, u: h.u.lane(lane), v: h.v.lane(lane), prim: block.prim(lane) };
@@ -267,17 +273,24 @@ impl<T: TriBlock> Bvh8<T> {
     /// True when anything lies in `(ray.tnear, ray.tfar]` (invalid rays are never occluded).
     #[inline]
     pub fn occluded1(&self, ray: &Ray) -> bool {
-        ray.is_valid() && self.occluded1_from(&Ray1::new(ray), self.root())
+        ray.is_valid()
+            && match self.test {
+                TriangleTest::MollerTrumbore => {
+                    self.occluded1_from::<MollerTrumboreKernel>(&Ray1::new(ray), self.root())
+                }
+                TriangleTest::Watertight => self.occluded1_from::<WatertightKernel>(&Ray1::new(ray), self.root()),
+            }
     }
 
     /// Any-hit traversal of the subtree `start`. Children are visited in slot order (no
-    /// sorting): an occluder anywhere ends the query, so ordering buys little.
+    /// sorting): an occluder anywhere ends the query, so ordering buys little. `K` must be
+    /// the kernel of `self.test`.
     #[inline]
-    pub fn occluded1_from(&self, r: &Ray1, start: NodeRef) -> bool {
+    pub fn occluded1_from<K: TriangleKernel>(&self, r: &Ray1, start: NodeRef) -> bool {
+        debug_assert_eq!(K::TEST, self.test, "kernel of the block layout");
         let mut stack = [const { MaybeUninit::<NodeRef>::uninit() }; BVH8_STACK];
         let mut sp = 0usize;
-        let org = Vec3x::<T::V>::splat(r.ray.origin);
-        let dir = Vec3x::<T::V>::splat(r.ray.dir);
+        let pre = K::ray1::<T::V>(&r.ray);
         let (tnear, tfar) = (T::V::splat(r.ray.tnear), T::V::splat(r.ray.tfar));
         let mut cur = start;
         loop {
@@ -305,7 +318,7 @@ impl<T: TriBlock> Bvh8<T> {
                     LeafKind::Triangles => {
                         for block in &self.tris[range] {
                             count!(BLOCKS, 1);
-                            if block.intersect1(&org, &dir, tnear, tfar).mask != 0 {
+                            if K::block(block, &pre, tnear, tfar).mask != 0 {
                                 return true;
                             }
                         }

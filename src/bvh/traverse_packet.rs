@@ -23,7 +23,8 @@
 //!   32 to 37; on shadow rays in stateless 16-ray packets the CBbunny from 71 to 133.
 //!
 //! Every lane gets exactly the hit the single-ray kernel gives it: the box tests are
-//! conservative and the triangle test is the same bit-exact Möller–Trumbore.
+//! conservative and the triangle test is the same bit-exact one (Möller–Trumbore or
+//! watertight, the BVH's [`TriangleKernel`], chosen once per packet).
 //!
 //! Tried and replaced (Stanford dragon, 871k triangles, 1024 x 768 camera rays in 4 x 4 tiles,
 //! 1 thread, best of 7, Mrays/s; Embree's `rtcIntersect16` with the coherent flag: 27.9):
@@ -48,9 +49,8 @@ use crate::bvh::counters::*;
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
 use crate::bvh::traverse1::Ray1;
 use crate::bvh::{BVH8_STACK, Bvh8};
-use crate::geometry::TriBlock;
 use crate::geometry::sphere_block::sphere_lanes;
-use crate::geometry::tri_block::moller_trumbore;
+use crate::geometry::{MollerTrumboreKernel, TriBlock, TriangleKernel, TriangleTest, WatertightKernel};
 use crate::ray::{Hit, Ray};
 use crate::simd::{F32x8, Lanes, Vec3x};
 use std::mem::MaybeUninit;
@@ -227,7 +227,14 @@ impl<V: Lanes> PacketRays<V> {
     /// closest hits: ray by ray (each against a whole block) when fewer rays than triangles
     /// are active, triangle by triangle (all rays against one) otherwise.
     #[inline(always)]
-    fn intersect_leaf_bits<T: TriBlock>(&mut self, bvh: &Bvh8<T>, leaf: NodeRef, active: u32, fr: Option<&Frustum>) {
+    fn intersect_leaf_bits<T: TriBlock, K: TriangleKernel>(
+        &mut self,
+        bvh: &Bvh8<T>,
+        leaf: NodeRef,
+        active: u32,
+        fr: Option<&Frustum>,
+        pre: &K::RayK<V>,
+    ) {
         if leaf.kind() == LeafKind::Spheres {
             self.intersect_spheres(bvh, leaf, V::from_bitmask(active));
             return;
@@ -239,21 +246,12 @@ impl<V: Lanes> PacketRays<V> {
             let mut todo = (1u32 << lanes) - 1;
             if TRIANGLE_CULL && lanes >= 4 {
                 if let Some(f) = fr {
-                    todo &= f.intersect_triangles(block);
+                    todo &= f.intersect_triangles_in(block, K::TEST);
                 }
             }
             count!(PACKET_TRI_TESTS, todo.count_ones());
             for lane in crate::simd::bits(todo) {
-                let [v0, e1, e2] = block.lane_edges(lane);
-                let (m, t, u, v) = moller_trumbore(
-                    &self.org,
-                    &self.dir,
-                    self.tnear,
-                    self.tfar,
-                    &Vec3x::splat(v0),
-                    &Vec3x::splat(e1),
-                    &Vec3x::splat(e2),
-                );
+                let (m, t, u, v) = K::broadcast(&block.lane_rows(lane), pre, self.tnear, self.tfar);
                 let m = m & act;
                 if m.bitmask() != 0 {
                     self.tfar = m.select(t, self.tfar);
@@ -267,13 +265,14 @@ impl<V: Lanes> PacketRays<V> {
 
     /// The lanes of `active` (bit mask) blocked by anything in `leaf`, as a bit mask.
     #[inline(always)]
-    fn occluded_leaf_bits<T: TriBlock>(
+    fn occluded_leaf_bits<T: TriBlock, K: TriangleKernel>(
         &self,
         bvh: &Bvh8<T>,
         leaf: NodeRef,
         active: u32,
         cache: &mut OccluderCache,
         fr: Option<&Frustum>,
+        pre: &K::RayK<V>,
     ) -> u32 {
         let mut occ = 0u32;
         let range = leaf.first_block()..leaf.first_block() + leaf.block_count();
@@ -284,25 +283,17 @@ impl<V: Lanes> PacketRays<V> {
                     let mut todo = (1u32 << lanes) - 1;
                     if TRIANGLE_CULL && lanes >= 4 {
                         if let Some(f) = fr {
-                            todo &= f.intersect_triangles(block);
+                            todo &= f.intersect_triangles_in(block, K::TEST);
                         }
                     }
                     count!(PACKET_TRI_TESTS, todo.count_ones());
                     for lane in crate::simd::bits(todo) {
-                        let [v0, e1, e2] = block.lane_edges(lane);
-                        let (m, ..) = moller_trumbore(
-                            &self.org,
-                            &self.dir,
-                            self.tnear,
-                            self.tfar,
-                            &Vec3x::splat(v0),
-                            &Vec3x::splat(e1),
-                            &Vec3x::splat(e2),
-                        );
+                        let rows = block.lane_rows(lane);
+                        let (m, ..) = K::broadcast(&rows, pre, self.tnear, self.tfar);
                         let blocked = m.bitmask() & active;
                         if blocked != 0 {
                             occ |= blocked;
-                            cache.tri = Some([v0, e1, e2]);
+                            cache.tri = Some((K::TEST, rows));
                             if active & !occ == 0 {
                                 return occ;
                             }
@@ -335,10 +326,24 @@ impl<V: Lanes> PacketRays<V> {
 /// `threshold` lanes are finished lane by lane with the single-ray kernel; leaves are tested
 /// ray by ray or triangle by triangle, whichever is fewer tests.
 pub fn intersect_hybrid<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, rays: &mut PacketRays<V>, threshold: usize) {
+    match bvh.test {
+        TriangleTest::MollerTrumbore => intersect_hybrid_with::<V, T, MollerTrumboreKernel>(bvh, rays, threshold),
+        TriangleTest::Watertight => intersect_hybrid_with::<V, T, WatertightKernel>(bvh, rays, threshold),
+    }
+}
+
+/// [`intersect_hybrid`] with triangle kernel `K` (which must be the kernel of `bvh.test`).
+pub fn intersect_hybrid_with<V: Lanes, T: TriBlock, K: TriangleKernel>(
+    bvh: &Bvh8<T>,
+    rays: &mut PacketRays<V>,
+    threshold: usize,
+) {
+    debug_assert_eq!(K::TEST, bvh.test, "kernel of the block layout");
     let all = rays.active_mask();
     if all == 0 {
         return;
     }
+    let pre = K::ray_k(&rays.org, &rays.dir);
     let frustum = Frustum::new(std::slice::from_ref(rays));
     let inf = V::splat(f32::INFINITY);
     let mut refs = [const { MaybeUninit::<NodeRef>::uninit() }; BVH8_STACK];
@@ -355,7 +360,7 @@ pub fn intersect_hybrid<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, rays: &mut PacketR
                     let r = rays.ray(i);
                     let mut tfar = r.tfar;
                     let mut hit = Hit::MISS;
-                    bvh.intersect1_from(&Ray1::new(&r), cur, &mut tfar, &mut hit);
+                    bvh.intersect1_from::<K>(&Ray1::new(&r), cur, &mut tfar, &mut hit);
                     if hit.is_hit() {
                         rays.set_lane(i, tfar, &hit);
                     }
@@ -363,7 +368,7 @@ pub fn intersect_hybrid<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, rays: &mut PacketR
                 break 'descend;
             }
             if cur.is_leaf() {
-                rays.intersect_leaf_bits(bvh, cur, active, frustum.as_ref());
+                rays.intersect_leaf_bits::<T, K>(bvh, cur, active, frustum.as_ref(), &pre);
                 break 'descend;
             }
             let node = &bvh.nodes[cur.node_index()];
@@ -460,7 +465,8 @@ pub fn intersect_hybrid<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, rays: &mut PacketR
 /// against 57.2 without, beetle 76.0 against 76.1, dragon 32.3 against 32.4 Mrays/s.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct OccluderCache {
-    tri: Option<[crate::math::Vec3; 3]>,
+    /// The stored rows of the last occluder, and the layout they are in.
+    tri: Option<(TriangleTest, [crate::math::Vec3; 3])>,
 }
 
 /// Packet leaves: skip triangles whose (padded) boxes the frustum misses.
@@ -483,21 +489,29 @@ pub fn occluded_hybrid<V: Lanes, T: TriBlock>(
     threshold: usize,
     cache: &mut OccluderCache,
 ) -> u32 {
+    match bvh.test {
+        TriangleTest::MollerTrumbore => occluded_hybrid_with::<V, T, MollerTrumboreKernel>(bvh, rays, threshold, cache),
+        TriangleTest::Watertight => occluded_hybrid_with::<V, T, WatertightKernel>(bvh, rays, threshold, cache),
+    }
+}
+
+/// [`occluded_hybrid`] with triangle kernel `K` (which must be the kernel of `bvh.test`).
+pub fn occluded_hybrid_with<V: Lanes, T: TriBlock, K: TriangleKernel>(
+    bvh: &Bvh8<T>,
+    rays: &PacketRays<V>,
+    threshold: usize,
+    cache: &mut OccluderCache,
+) -> u32 {
+    debug_assert_eq!(K::TEST, bvh.test, "kernel of the block layout");
     let all = rays.active_mask();
     let mut occluded = 0u32;
     if all == 0 {
         return 0;
     }
-    if let Some([v0, e1, e2]) = cache.tri {
-        let (m, ..) = moller_trumbore(
-            &rays.org,
-            &rays.dir,
-            rays.tnear,
-            rays.tfar,
-            &Vec3x::splat(v0),
-            &Vec3x::splat(e1),
-            &Vec3x::splat(e2),
-        );
+    let pre = K::ray_k(&rays.org, &rays.dir);
+    if let Some((test, rows)) = cache.tri.filter(|c| c.0 == K::TEST) {
+        debug_assert_eq!(test, K::TEST);
+        let (m, ..) = K::broadcast(&rows, &pre, rays.tnear, rays.tfar);
         occluded = m.bitmask() & all;
         if occluded == all {
             return occluded;
@@ -514,14 +528,14 @@ pub fn occluded_hybrid<V: Lanes, T: TriBlock>(
             if active.count_ones() as usize <= threshold {
                 count!(FALLBACK_RAYS, active.count_ones());
                 for i in crate::simd::bits(active) {
-                    if bvh.occluded1_from(&Ray1::new(&rays.ray(i)), cur) {
+                    if bvh.occluded1_from::<K>(&Ray1::new(&rays.ray(i)), cur) {
                         occluded |= 1 << i;
                     }
                 }
                 break 'descend;
             }
             if cur.is_leaf() {
-                occluded |= rays.occluded_leaf_bits(bvh, cur, active, cache, frustum.as_ref());
+                occluded |= rays.occluded_leaf_bits::<T, K>(bvh, cur, active, cache, frustum.as_ref(), &pre);
                 break 'descend;
             }
             let node = &bvh.nodes[cur.node_index()];
@@ -561,7 +575,8 @@ pub fn occluded_hybrid<V: Lanes, T: TriBlock>(
             for i in crate::simd::bits(leaves) {
                 let m = leaf_masks[i] & !occluded;
                 if m != 0 {
-                    occluded |= rays.occluded_leaf_bits(bvh, node.children[i], m, cache, frustum.as_ref());
+                    occluded |=
+                        rays.occluded_leaf_bits::<T, K>(bvh, node.children[i], m, cache, frustum.as_ref(), &pre);
                     if all & !occluded == 0 {
                         return occluded;
                     }
@@ -683,15 +698,23 @@ impl Frustum {
         })
     }
 
-    /// Could any ray of the tile hit the triangles of `block`? Bit `i` is set when lane `i`'s
-    /// bounding box, grown by 2^-20 of its largest coordinate magnitude (the rounding of
-    /// `v0 + e1` and `v0 + e2` is far smaller), passes the same interval test as
-    /// [`Frustum::intersect_node`].
+    /// Could any ray of the tile hit the triangles of `block` (laid out for Möller–Trumbore)?
+    /// Bit `i` is set when lane `i`'s bounding box, grown by 2^-20 of its largest coordinate
+    /// magnitude (the rounding of `v0 + e1` and `v0 + e2` is far smaller), passes the same
+    /// interval test as [`Frustum::intersect_node`].
     #[inline(always)]
     pub fn intersect_triangles<B: TriBlock>(&self, block: &B) -> u32 {
+        self.intersect_triangles_in(block, TriangleTest::MollerTrumbore)
+    }
+
+    /// [`Frustum::intersect_triangles`] for a block laid out for `test` (whose second and
+    /// third rows are the vertices themselves in the watertight layout).
+    #[inline(always)]
+    pub fn intersect_triangles_in<B: TriBlock>(&self, block: &B, test: TriangleTest) -> u32 {
         let (v0, e1, e2) = (block.v0(), block.e1(), block.e2());
+        let vertices = test == TriangleTest::Watertight;
         let axis = |a: &B::V, b: &B::V, c: &B::V| {
-            let (p1, p2) = (*a + *b, *a + *c);
+            let (p1, p2) = if vertices { (*b, *c) } else { (*a + *b, *a + *c) };
             let lo = a.vmin(p1).vmin(p2);
             let hi = a.vmax(p1).vmax(p2);
             (lo, hi)

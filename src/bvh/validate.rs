@@ -113,7 +113,7 @@ pub fn validate_bvh8<T: crate::geometry::TriBlock>(
     }
     for (k, b) in bvh.tris.iter().enumerate() {
         for lane in 0..T::M {
-            let [_, e1, e2] = b.lane_edges(lane);
+            let [_, e1, e2] = b.lane_rows(lane);
             if b.prim(lane) == u32::MAX && (e1 != crate::math::Vec3::ZERO || e2 != crate::math::Vec3::ZERO) {
                 return Err(format!("padding lane {lane} of triangle block {k} is not inert"));
             }

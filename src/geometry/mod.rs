@@ -8,8 +8,10 @@ pub mod sphere;
 pub mod sphere_block;
 pub mod tri_block;
 pub mod triangle;
+pub mod watertight;
 
 pub use sphere::intersect_sphere;
 pub use sphere_block::Sphere4;
-pub use tri_block::{Tri4, Tri8, TriBlock};
+pub use tri_block::{MollerTrumboreKernel, Tri4, Tri8, TriBlock, TriangleKernel, TriangleTest, WatertightKernel};
 pub use triangle::{intersect_triangle, intersect_triangle_edges};
+pub use watertight::intersect_triangle_watertight;

@@ -6,6 +6,13 @@
 //! the normal costs 3 more rows of memory and is 9 cheap lane operations to recompute).
 //! Padding lanes have zero edges, so their determinant is exactly 0 and they never hit.
 //!
+//! For the watertight test ([`crate::geometry::watertight`]) the same blocks store the exact
+//! vertices `v0, v1, v2` in those rows instead ([`TriangleTest::Watertight`]): the same 40
+//! bytes per triangle, so the layout costs no memory; padding lanes are three zero vertices
+//! (a degenerate triangle, never hit). The traversal kernels are generic over a
+//! [`TriangleKernel`], which knows the layout, its per-ray constants and its tests (one ray
+//! against a block, K rays against one triangle, and the scalar twin).
+//!
 //! One routine, [`moller_trumbore`], serves both directions of SIMD: one ray (broadcast)
 //! against the M triangles of a block, and K rays of a packet against one triangle
 //! (broadcast). It performs the scalar reference's operations in the scalar reference's
@@ -17,7 +24,9 @@
 //! the scene uses and the measurement that chose it.
 
 use crate::geometry::triangle::intersect_triangle_edges;
+use crate::geometry::watertight::{ShearLanes, intersect_triangle_watertight, shear_frame, watertight};
 use crate::math::Vec3;
+use crate::ray::Ray;
 use crate::simd::{F32x4, F32x8, Lanes, Vec3x};
 
 /// Intersects rays with triangles lane by lane: ray lane `i` against triangle lane `i`
@@ -88,8 +97,23 @@ pub trait TriBlock: Copy + Send + Sync + std::fmt::Debug + 'static {
     const M: usize;
     /// A block whose lanes are all padding.
     const EMPTY: Self;
-    /// Stores triangle `(v0, v1, v2)` with primitive id `prim` in `lane`.
+    /// Stores triangle `(v0, v1, v2)` with primitive id `prim` in `lane` as `v0` and edges
+    /// (the layout of [`TriangleTest::MollerTrumbore`]).
     fn set(&mut self, lane: usize, v0: Vec3, v1: Vec3, v2: Vec3, prim: u32);
+    /// Stores triangle `(v0, v1, v2)` with primitive id `prim` in `lane` as its three exact
+    /// vertices (the layout of [`TriangleTest::Watertight`]).
+    fn set_vertices(&mut self, lane: usize, v0: Vec3, v1: Vec3, v2: Vec3, prim: u32);
+    /// Stores a triangle in the layout of `test`.
+    #[inline]
+    fn set_for(&mut self, test: TriangleTest, lane: usize, v0: Vec3, v1: Vec3, v2: Vec3, prim: u32) {
+        match test {
+            TriangleTest::MollerTrumbore => self.set(lane, v0, v1, v2, prim),
+            TriangleTest::Watertight => self.set_vertices(lane, v0, v1, v2, prim),
+        }
+    }
+    /// Row `axis` (0 = x, 1 = y, 2 = z) of stored vector `r` (0 = `v0`, 1 = `e1` or `v1`,
+    /// 2 = `e2` or `v2`).
+    fn row(&self, r: usize, axis: usize) -> Self::V;
     /// First vertices.
     fn v0(&self) -> Vec3x<Self::V>;
     /// First edges.
@@ -98,8 +122,14 @@ pub trait TriBlock: Copy + Send + Sync + std::fmt::Debug + 'static {
     fn e2(&self) -> Vec3x<Self::V>;
     /// Primitive id of `lane` (`u32::MAX` for padding).
     fn prim(&self, lane: usize) -> u32;
-    /// `v0`, `e1`, `e2` of `lane` as scalars.
-    fn lane_edges(&self, lane: usize) -> [Vec3; 3];
+    /// The three stored vectors of `lane` as scalars: `v0`, `e1`, `e2` in the
+    /// Möller–Trumbore layout, `v0`, `v1`, `v2` in the watertight one.
+    fn lane_rows(&self, lane: usize) -> [Vec3; 3];
+    /// Bit `i` set when lane `i` holds a triangle (not padding).
+    #[inline]
+    fn live_lanes(&self) -> u32 {
+        (0..Self::M).filter(|&l| self.prim(l) != u32::MAX).fold(0, |m, l| m | 1 << l)
+    }
 
     /// One ray against all M triangles: `(hit mask, t, u, v)` per lane.
     #[inline(always)]
@@ -118,10 +148,157 @@ pub trait TriBlock: Copy + Send + Sync + std::fmt::Debug + 'static {
     fn intersect1_scalar(&self, origin: Vec3, dir: Vec3, tnear: f32, tfar: f32) -> [Option<(f32, f32, f32)>; 16] {
         let mut out = [None; 16];
         for (lane, o) in out.iter_mut().enumerate().take(Self::M) {
-            let [v0, e1, e2] = self.lane_edges(lane);
+            let [v0, e1, e2] = self.lane_rows(lane);
             *o = intersect_triangle_edges(origin, dir, tnear, tfar, v0, e1, e2);
         }
         out
+    }
+}
+
+/// Which ray/triangle test a BVH's leaf blocks are built for, and so what they store.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum TriangleTest {
+    /// Möller–Trumbore ([`moller_trumbore`]): blocks store `v0`, `e1 = v1 - v0`, `e2 = v2 - v0`.
+    /// Fast, but a ray through a shared edge can slip between the two triangles.
+    #[default]
+    MollerTrumbore,
+    /// Woop, Benthin and Wald's watertight test ([`crate::geometry::watertight`]): blocks
+    /// store the exact vertices `v0`, `v1`, `v2`. No ray slips through a shared edge or vertex.
+    Watertight,
+}
+
+impl TriangleTest {
+    /// The test `BuildOptions::watertight` asks for.
+    pub fn from_watertight(watertight: bool) -> Self {
+        if watertight { Self::Watertight } else { Self::MollerTrumbore }
+    }
+
+    /// Short name, as printed by the CLI.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::MollerTrumbore => "moller-trumbore",
+            Self::Watertight => "watertight",
+        }
+    }
+}
+
+/// A ray/triangle test as the traversal kernels use it: per-ray constants, one ray against
+/// the M lanes of a block, K rays against one triangle, and the scalar twin, all on the rows
+/// a block stores in the kernel's layout. Implemented by [`MollerTrumboreKernel`] and
+/// [`WatertightKernel`]; all three tests of one kernel are bit-identical lane by lane.
+pub trait TriangleKernel: 'static {
+    /// The test (and block layout) this kernel implements.
+    const TEST: TriangleTest;
+    /// Per-ray constants of one ray, in lanes of width `W`.
+    type Ray1<W: Lanes>: Copy;
+    /// The constants of `ray` (which must be valid).
+    fn ray1<W: Lanes>(ray: &Ray) -> Self::Ray1<W>;
+    /// One ray against the M triangles of `block`: `(hit mask, t, u, v)` per lane.
+    fn block<B: TriBlock>(block: &B, ray: &Self::Ray1<B::V>, tnear: B::V, tfar: B::V) -> BlockHits<B::V>;
+    /// Per-ray constants of K rays (one per lane).
+    type RayK<W: Lanes>: Copy;
+    /// The constants of the rays `org + t dir` (inactive lanes may hold anything).
+    fn ray_k<W: Lanes>(org: &Vec3x<W>, dir: &Vec3x<W>) -> Self::RayK<W>;
+    /// K rays against one triangle given by its stored rows ([`TriBlock::lane_rows`]):
+    /// `(hit mask, t, u, v)`.
+    fn broadcast<W: Lanes>(rows: &[Vec3; 3], rays: &Self::RayK<W>, tnear: W, tfar: W) -> (W, W, W, W);
+    /// The scalar twin, on a triangle's vertices.
+    fn scalar(ray: &Ray, tfar: f32, v0: Vec3, v1: Vec3, v2: Vec3) -> Option<(f32, f32, f32)>;
+}
+
+/// Origins and directions in lanes: the per-ray constants of Möller–Trumbore.
+#[derive(Clone, Copy, Debug)]
+pub struct RayLanes<W> {
+    /// Origins.
+    pub org: Vec3x<W>,
+    /// Directions.
+    pub dir: Vec3x<W>,
+}
+
+/// [`moller_trumbore`] on blocks of `v0`, `e1`, `e2`.
+#[derive(Clone, Copy, Debug)]
+pub struct MollerTrumboreKernel;
+
+impl TriangleKernel for MollerTrumboreKernel {
+    const TEST: TriangleTest = TriangleTest::MollerTrumbore;
+    type Ray1<W: Lanes> = RayLanes<W>;
+    type RayK<W: Lanes> = RayLanes<W>;
+
+    #[inline(always)]
+    fn ray1<W: Lanes>(ray: &Ray) -> RayLanes<W> {
+        RayLanes { org: Vec3x::splat(ray.origin), dir: Vec3x::splat(ray.dir) }
+    }
+
+    #[inline(always)]
+    fn block<B: TriBlock>(block: &B, ray: &RayLanes<B::V>, tnear: B::V, tfar: B::V) -> BlockHits<B::V> {
+        block.intersect1(&ray.org, &ray.dir, tnear, tfar)
+    }
+
+    #[inline(always)]
+    fn ray_k<W: Lanes>(org: &Vec3x<W>, dir: &Vec3x<W>) -> RayLanes<W> {
+        RayLanes { org: *org, dir: *dir }
+    }
+
+    #[inline(always)]
+    fn broadcast<W: Lanes>(rows: &[Vec3; 3], rays: &RayLanes<W>, tnear: W, tfar: W) -> (W, W, W, W) {
+        let [v0, e1, e2] = rows.map(Vec3x::splat);
+        moller_trumbore(&rays.org, &rays.dir, tnear, tfar, &v0, &e1, &e2)
+    }
+
+    #[inline]
+    fn scalar(ray: &Ray, tfar: f32, v0: Vec3, v1: Vec3, v2: Vec3) -> Option<(f32, f32, f32)> {
+        crate::geometry::intersect_triangle(ray.origin, ray.dir, ray.tnear, tfar, v0, v1, v2)
+    }
+}
+
+/// One ray's sheared frame, as lanes for the watertight block test.
+#[derive(Clone, Copy, Debug)]
+pub struct ShearRay<W> {
+    /// `[kx, ky, kz]`.
+    axes: [usize; 3],
+    /// The origin's `[kx, ky, kz]` components.
+    org: [W; 3],
+    /// `[Sx, Sy, Sz]`.
+    shear: [W; 3],
+}
+
+/// [`crate::geometry::watertight`] on blocks of `v0`, `v1`, `v2`.
+#[derive(Clone, Copy, Debug)]
+pub struct WatertightKernel;
+
+impl TriangleKernel for WatertightKernel {
+    const TEST: TriangleTest = TriangleTest::Watertight;
+    type Ray1<W: Lanes> = ShearRay<W>;
+    type RayK<W: Lanes> = ShearLanes<W>;
+
+    #[inline(always)]
+    fn ray1<W: Lanes>(ray: &Ray) -> ShearRay<W> {
+        let (axes, shear) = shear_frame(ray.dir);
+        ShearRay { axes, org: axes.map(|k| W::splat(ray.origin[k])), shear: shear.map(W::splat) }
+    }
+
+    #[inline(always)]
+    fn block<B: TriBlock>(block: &B, ray: &ShearRay<B::V>, tnear: B::V, tfar: B::V) -> BlockHits<B::V> {
+        let [kx, ky, kz] = ray.axes;
+        let rel =
+            |r: usize| [block.row(r, kx) - ray.org[0], block.row(r, ky) - ray.org[1], block.row(r, kz) - ray.org[2]];
+        let (mask, t, u, v) = watertight(rel(0), rel(1), rel(2), ray.shear, tnear, tfar, || block.live_lanes());
+        BlockHits { mask: mask.bitmask(), t, u, v }
+    }
+
+    #[inline(always)]
+    fn ray_k<W: Lanes>(org: &Vec3x<W>, dir: &Vec3x<W>) -> ShearLanes<W> {
+        ShearLanes::new(org, dir)
+    }
+
+    #[inline(always)]
+    fn broadcast<W: Lanes>(rows: &[Vec3; 3], rays: &ShearLanes<W>, tnear: W, tfar: W) -> (W, W, W, W) {
+        rays.intersect(rows, tnear, tfar)
+    }
+
+    #[inline]
+    fn scalar(ray: &Ray, tfar: f32, v0: Vec3, v1: Vec3, v2: Vec3) -> Option<(f32, f32, f32)> {
+        intersect_triangle_watertight(ray.origin, ray.dir, ray.tnear, tfar, v0, v1, v2)
     }
 }
 
@@ -166,9 +343,9 @@ macro_rules! tri_block {
         pub struct $name {
             /// `v0` as rows `[x; M], [y; M], [z; M]`.
             pub v0: [[f32; $m]; 3],
-            /// `e1 = v1 - v0`, rows as `v0`.
+            /// `e1 = v1 - v0` (or `v1` in the watertight layout), rows as `v0`.
             pub e1: [[f32; $m]; 3],
-            /// `e2 = v2 - v0`, rows as `v0`.
+            /// `e2 = v2 - v0` (or `v2` in the watertight layout), rows as `v0`.
             pub e2: [[f32; $m]; 3],
             /// Scene primitive ids; `u32::MAX` in padding lanes.
             pub prim: [u32; $m],
@@ -196,6 +373,25 @@ macro_rules! tri_block {
                 self.prim[lane] = prim;
             }
 
+            fn set_vertices(&mut self, lane: usize, v0: Vec3, v1: Vec3, v2: Vec3, prim: u32) {
+                for a in 0..3 {
+                    self.v0[a][lane] = v0[a];
+                    self.e1[a][lane] = v1[a];
+                    self.e2[a][lane] = v2[a];
+                }
+                self.prim[lane] = prim;
+            }
+
+            #[inline(always)]
+            fn row(&self, r: usize, axis: usize) -> $v {
+                let rows = match r {
+                    0 => &self.v0,
+                    1 => &self.e1,
+                    _ => &self.e2,
+                };
+                <$v>::load(&rows[axis])
+            }
+
             #[inline(always)]
             fn v0(&self) -> Vec3x<$v> {
                 Vec3x { x: <$v>::load(&self.v0[0]), y: <$v>::load(&self.v0[1]), z: <$v>::load(&self.v0[2]) }
@@ -216,7 +412,7 @@ macro_rules! tri_block {
                 self.prim[lane]
             }
 
-            fn lane_edges(&self, lane: usize) -> [Vec3; 3] {
+            fn lane_rows(&self, lane: usize) -> [Vec3; 3] {
                 let row = |r: &[[f32; $m]; 3]| Vec3::new(r[0][lane], r[1][lane], r[2][lane]);
                 [row(&self.v0), row(&self.e1), row(&self.e2)]
             }

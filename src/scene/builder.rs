@@ -6,7 +6,8 @@
 //! triangles, non-positive radii) and counts them in the [`CommitReport`], as Embree does.
 //! An empty scene is legal: every ray misses.
 
-use crate::bvh::{BuildOptions, BuildPrim, Bvh2, Bvh8, build_bvh2, collapse};
+use crate::bvh::{BuildOptions, BuildPrim, Bvh2, Bvh8, build_bvh2, collapse_for};
+use crate::geometry::TriangleTest;
 use crate::math::{Aabb, Vec3};
 use crate::scene::{Camera, Light, Material, MaterialId, Scene, SpheresSoa, TrianglesSoa};
 
@@ -300,7 +301,8 @@ impl Filtered {
         let bvh2 = build_bvh2(&mut prims, opts);
         drop(prims);
         let mut scene = Scene { triangles, spheres, materials, lights, camera, bounds, bvh2, bvh8: Bvh8::default() };
-        scene.bvh8 = collapse(&scene.bvh2, |id| scene.prim_shape(id), &opts.collapse);
+        let test = TriangleTest::from_watertight(opts.watertight);
+        scene.bvh8 = collapse_for(&scene.bvh2, |id| scene.prim_shape(id), &opts.collapse, test);
         scene
     }
 

@@ -3,7 +3,9 @@
 //! Primitive ids are scene-wide: triangles `0 .. num_triangles()`, then spheres.
 
 use crate::bvh::{Bvh2, Bvh8, BvhStats, PrimShape};
-use crate::geometry::{intersect_sphere, intersect_triangle, sphere::sphere_uv};
+use crate::geometry::{
+    MollerTrumboreKernel, TriangleKernel, TriangleTest, WatertightKernel, intersect_sphere, sphere::sphere_uv,
+};
 use crate::math::{Aabb, Vec3};
 use crate::ray::{Hit, Ray};
 use crate::scene::{Camera, Light, Material};
@@ -200,14 +202,23 @@ impl Scene {
         if p < nt { self.triangles.bounds(p) } else { self.spheres.bounds(p - nt) }
     }
 
-    /// Intersects one primitive over `(ray.tnear, tfar]`: `(t, u, v)` or `None`.
+    /// The triangle test of the scene's kernels (and of its scalar reference and brute force).
+    pub fn triangle_test(&self) -> TriangleTest {
+        self.bvh8.test
+    }
+
+    /// Intersects one primitive over `(ray.tnear, tfar]` with the scene's triangle test:
+    /// `(t, u, v)` or `None`.
     #[inline]
     pub fn intersect_prim(&self, prim: u32, ray: &Ray, tfar: f32) -> Option<(f32, f32, f32)> {
         let nt = self.triangles.len();
         let p = prim as usize;
         if p < nt {
             let [a, b, c] = self.triangles.vertices(p);
-            intersect_triangle(ray.origin, ray.dir, ray.tnear, tfar, a, b, c)
+            match self.bvh8.test {
+                TriangleTest::MollerTrumbore => MollerTrumboreKernel::scalar(ray, tfar, a, b, c),
+                TriangleTest::Watertight => WatertightKernel::scalar(ray, tfar, a, b, c),
+            }
         } else {
             let s = p - nt;
             let center = self.spheres.center[s];
