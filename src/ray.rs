@@ -42,16 +42,23 @@ impl Ray {
         self.origin + self.dir * t
     }
 
-    /// True for rays a query can answer: finite origin and direction, non-zero direction,
-    /// `tnear` not NaN, and a non-empty interval. Invalid rays always miss.
+    /// True for rays a query can answer: finite origin and direction, a direction with some
+    /// component of magnitude at least [`Ray::MIN_DIRECTION`], `tnear >= 0` and
+    /// `tnear <= tfar` (neither NaN). Invalid rays always miss.
     #[inline]
     pub fn is_valid(&self) -> bool {
         self.origin.is_finite()
             && self.dir.is_finite()
-            && self.dir != Vec3::ZERO
+            && self.dir.abs().max_element() >= Self::MIN_DIRECTION
             && self.tnear >= 0.0
             && self.tnear <= self.tfar
     }
+
+    /// The smallest largest-component of a valid direction: the slab tests' reciprocal
+    /// clamp ([`crate::math::safe_recip`]). A direction shorter than this on every axis has
+    /// no exact reciprocal on any axis, so box tests would cut its (huge) hit distances short;
+    /// such rays count as having no direction, like a zero one.
+    pub const MIN_DIRECTION: f32 = 1e-18;
 
     /// Per-ray constants for slab tests: the safe reciprocal direction.
     #[inline]

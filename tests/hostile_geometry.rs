@@ -48,6 +48,7 @@ fn check(what: &str, scene: &Scene, rays: &[Ray]) -> usize {
         if w.is_hit() {
             assert_eq!(got.t.to_bits(), w.t.to_bits(), "{what} ({test}) {q} ray {i}: t {} vs {}", got.t, w.t);
             assert!(got.u.is_finite() && got.v.is_finite(), "{what} ({test}) {q} ray {i}: u, v");
+            assert!(got.t.is_finite(), "{what} ({test}) {q} ray {i}: t {}", got.t);
         }
     };
     for (i, r) in rays.iter().enumerate() {
@@ -106,14 +107,15 @@ fn zero_area_slivers_and_duplicates() {
     let (mut zero, mut slivers) = (0, 0);
     for i in 0..3000 {
         let (p, d, e) = (r3(), r3() * 0.1, r3() * 0.1);
+        let perp = d.cross(e).cross(d).normalize_or(Vec3::Z) * d.length();
         let t = match i % 6 {
-            0 => [p, p, p + d],                      // repeated vertex: zero area
-            1 => [p, p + d, p + d * 2.0],            // collinear (zero area up to rounding)
-            2 => [p, p + d, p + d * 0.5 + e * 1e-6], // sliver
-            3 => [p, p + d * 1e-4, p + e],           // needle
+            0 => [p, p, p + d],                         // repeated vertex: zero area
+            1 => [p, p + d, p + d * 2.0],               // collinear up to rounding
+            2 => [p, p + d, p + d * 0.5 + perp * 1e-5], // sliver
+            3 => [p, p + d * 1e-4, p + e],              // needle
             _ => [p, p + d, p + e],
         };
-        zero += (i % 6 == 0) as usize;
+        zero += (i % 6 < 2) as usize;
         slivers += (i % 6 == 2) as usize;
         tris.push(t);
     }
@@ -122,9 +124,10 @@ fn zero_area_slivers_and_duplicates() {
     tris.extend(std::iter::repeat_n(dup, 300));
     let mesh = soup(&tris);
     for (scene, report) in commit_both(&mesh, &[]) {
-        assert!(report.dropped_degenerate >= zero, "{report}: the {zero} repeated-vertex triangles are dropped");
-        assert_eq!(report.triangles + report.dropped_degenerate, tris.len(), "{report}");
-        assert!(report.triangles >= tris.len() - 2 * 500 - 1, "{report}: slivers ({slivers}) and needles are kept");
+        // Repeated-vertex triangles and most "collinear" ones (those whose rounded corners are
+        // collinear within rounding) are dropped; slivers and needles are kept.
+        assert!((zero / 2 + zero / 4..=zero).contains(&report.dropped_degenerate), "{report}");
+        assert_eq!(report.triangles + report.dropped_degenerate, tris.len(), "{report}: {slivers} slivers kept");
         let points: Vec<Vec3> = tris.iter().map(|t| (t[0] + t[1] + t[2]) / 3.0).collect();
         let rays = rays_for(&scene, 20_000, &points);
         let hits = check("zero-area/sliver/duplicate soup", &scene, &rays);

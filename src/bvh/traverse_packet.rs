@@ -118,7 +118,8 @@ impl<V: Lanes> PacketRays<V> {
         let zero = V::splat(0.0);
         let finite = org.x.is_finite() & org.y.is_finite() & org.z.is_finite();
         let finite = finite & dir.x.is_finite() & dir.y.is_finite() & dir.z.is_finite();
-        let nonzero = !(dir.x.eq(zero) & dir.y.eq(zero) & dir.z.eq(zero));
+        let abs = |x: V| x & !V::splat(-0.0);
+        let nonzero = abs(dir.x).vmax(abs(dir.y)).vmax(abs(dir.z)).ge(V::splat(Ray::MIN_DIRECTION));
         let interval = tnear.ge(zero) & tnear.le(tfar);
         let mut bits = [0.0f32; 16];
         for (i, b) in bits.iter_mut().enumerate().take(V::LANES) {

@@ -83,10 +83,27 @@ pub fn moller_trumbore<V: Lanes>(
     let inv_det = one / det;
     let u = uu * inv_det;
     let v = vv * inv_det;
-    let t = tt * inv_det;
+    let mut t = tt * inv_det;
     let inside = u.ge(zero) & u.le(one) & !v.lt(zero) & !(u + v).gt(one);
-    let valid = det_ok & inside & t.gt(tnear) & t.le(tfar);
+    let overflow = (det_ok & inside & !t.is_finite()).bitmask();
+    if overflow != 0 {
+        // Rare: the dot product overflowed (origin ~1e13 or more away); redo it in f64.
+        t = redo_t_f64(t, overflow, e2, &q, inv_det);
+    }
+    let valid = det_ok & inside & t.gt(tnear) & t.le(tfar) & t.lt(V::splat(f32::INFINITY));
     (valid, t, u, v)
+}
+
+/// `t` with the lanes of `lanes` recomputed by [`crate::geometry::triangle::t_f64`].
+#[cold]
+#[inline(never)]
+fn redo_t_f64<V: Lanes>(t: V, lanes: u32, e2: &Vec3x<V>, q: &Vec3x<V>, inv_det: V) -> V {
+    let mut out = [0.0f32; 16];
+    t.store(&mut out);
+    for i in crate::simd::bits(lanes) {
+        out[i] = crate::geometry::triangle::t_f64(e2.lane(i), q.lane(i), inv_det.lane(i));
+    }
+    V::load(&out)
 }
 
 /// A block of M triangles in structure-of-arrays form. Implemented by [`Tri4`] and [`Tri8`].

@@ -49,8 +49,19 @@ pub fn intersect_triangle_edges(
     if v < 0.0 || u + v > 1.0 {
         return None;
     }
-    let t = e2.dot(q) * inv_det;
-    if t > tnear && t <= tfar { Some((t, u, v)) } else { None }
+    let mut t = e2.dot(q) * inv_det;
+    if !t.is_finite() {
+        t = t_f64(e2, q, inv_det);
+    }
+    if t > tnear && t <= tfar && t < f32::INFINITY { Some((t, u, v)) } else { None }
+}
+
+/// `e2 · q * inv_det` in double precision, rounded to `f32`: the fallback when the `f32` dot
+/// product overflows (it grows with the cube of the distance between origin and triangle,
+/// past `f32::MAX` beyond about 7e12 for a unit direction). The SIMD kernel uses the same.
+#[inline]
+pub fn t_f64(e2: Vec3, q: Vec3, inv_det: f32) -> f32 {
+    (e2.as_dvec3().dot(q.as_dvec3()) * inv_det as f64) as f32
 }
 
 /// The unnormalised geometric normal `(v1 - v0) x (v2 - v0)`; its length is twice the area.

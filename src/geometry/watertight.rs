@@ -89,8 +89,21 @@ pub fn intersect_triangle_watertight(
     let (az, bz, cz) = (sz * a[kz], sz * b[kz], sz * c[kz]);
     let tt = u * az + v * bz + w * cz;
     let inv_det = 1.0 / det;
-    let t = tt * inv_det;
-    if inv_det.is_finite() && t > tnear && t <= tfar { Some((t, v * inv_det, w * inv_det)) } else { None }
+    let mut t = tt * inv_det;
+    if !t.is_finite() {
+        t = t_f64([u, v, w], [az, bz, cz], inv_det);
+    }
+    let ok = inv_det.is_finite() && t < f32::INFINITY;
+    if ok && t > tnear && t <= tfar { Some((t, v * inv_det, w * inv_det)) } else { None }
+}
+
+/// `(U Az + V Bz + W Cz) * inv_det` in double precision, rounded to `f32`: the fallback when
+/// the `f32` sum overflows (it grows with the cube of the distance between origin and
+/// triangle). The SIMD kernel uses the same.
+#[inline]
+pub fn t_f64(uvw: [f32; 3], z: [f32; 3], inv_det: f32) -> f32 {
+    let d = |x: f32| x as f64;
+    ((d(uvw[0]) * d(z[0]) + d(uvw[1]) * d(z[1]) + d(uvw[2]) * d(z[2])) * d(inv_det)) as f32
 }
 
 /// The watertight test on lanes: `a`, `b`, `c` are the three vertices relative to the ray
@@ -141,9 +154,25 @@ pub fn watertight<V: Lanes>(
     let (az, bz, cz) = (s[2] * a[2], s[2] * b[2], s[2] * c[2]);
     let tt = u * az + v * bz + w * cz;
     let inv_det = V::splat(1.0) / det;
-    let t = tt * inv_det;
-    let valid = maybe & inv_det.is_finite() & t.gt(tnear) & t.le(tfar);
+    let mut t = tt * inv_det;
+    let overflow = (maybe & !t.is_finite()).bitmask();
+    if overflow != 0 {
+        t = redo_t_f64(t, overflow, [u, v, w], [az, bz, cz], inv_det);
+    }
+    let valid = maybe & inv_det.is_finite() & t.lt(V::splat(f32::INFINITY)) & t.gt(tnear) & t.le(tfar);
     (valid, t, v * inv_det, w * inv_det)
+}
+
+/// `t` with the lanes of `lanes` recomputed by [`t_f64`].
+#[cold]
+#[inline(never)]
+fn redo_t_f64<V: Lanes>(t: V, lanes: u32, uvw: [V; 3], z: [V; 3], inv_det: V) -> V {
+    let mut out = [0.0f32; 16];
+    t.store(&mut out);
+    for i in crate::simd::bits(lanes) {
+        out[i] = t_f64(uvw.map(|x| x.lane(i)), z.map(|x| x.lane(i)), inv_det.lane(i));
+    }
+    V::load(&out)
 }
 
 /// Per-lane sheared frames of K rays (for one triangle against a packet): lane masks that

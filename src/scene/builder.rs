@@ -2,8 +2,8 @@
 //!
 //! `add_*` calls check the buffers they are given (index ranges, material ids) and return
 //! [`SceneError`] on malformed input. [`SceneBuilder::commit`] never fails: it drops
-//! primitives that cannot be traced (NaN/Inf or absurdly large coordinates, zero-area
-//! triangles, non-positive radii) and counts them in the [`CommitReport`], as Embree does.
+//! primitives that cannot be traced (NaN/Inf or absurdly large coordinates, zero-area or
+//! collinear triangles, non-positive radii) and counts them in the [`CommitReport`], as Embree does.
 //! An empty scene is legal: every ray misses.
 
 use crate::bvh::{BuildOptions, BuildPrim, Bvh2, Bvh8, build_bvh2, collapse_for};
@@ -52,7 +52,8 @@ pub struct CommitReport {
     pub spheres: usize,
     /// Triangles dropped for NaN/Inf or out-of-range coordinates.
     pub dropped_non_finite: usize,
-    /// Triangles dropped for having zero area.
+    /// Triangles dropped for having zero area, or a normal lost in rounding (collinear
+    /// corners; see [`is_degenerate`]).
     pub dropped_degenerate: usize,
     /// Spheres dropped (non-finite centre or radius, radius <= 0).
     pub dropped_spheres: usize,
@@ -71,7 +72,7 @@ impl std::fmt::Display for CommitReport {
         if self.dropped() > 0 {
             write!(
                 f,
-                " (dropped {} triangles with NaN/Inf/huge coordinates, {} zero-area triangles, {} invalid spheres)",
+                " (dropped {} triangles with NaN/Inf/huge coordinates, {} zero-area or collinear triangles, {} invalid spheres)",
                 self.dropped_non_finite, self.dropped_degenerate, self.dropped_spheres
             )?;
         }
@@ -242,8 +243,7 @@ impl SceneBuilder {
                 report.dropped_non_finite += 1;
                 continue;
             }
-            // Zero area in floating point: the cross product vanishes (or underflows).
-            if (b - a).cross(c - a) == Vec3::ZERO {
+            if is_degenerate(a, b, c) {
                 report.dropped_degenerate += 1;
                 continue;
             }
@@ -311,6 +311,21 @@ impl Filtered {
         let Filtered { triangles, spheres, materials, lights, camera } = self;
         Scene { triangles, spheres, materials, lights, camera, bounds, bvh2, bvh8 }
     }
+}
+
+/// True when triangle `(a, b, c)` has no usable plane: its `f32` cross product vanishes (or
+/// underflows), or its corners are collinear within rounding — the sine of the angle at `a`
+/// is at most `4 f32::EPSILON`, the size of the rounding error of the edges' cross product
+/// relative to their lengths (computed in `f64`, so that 1e18 coordinates do not overflow).
+/// On such a triangle both triangle tests divide by a determinant made of rounding error and
+/// report hits at arbitrary distances, outside the triangle's box (where no BVH would look).
+pub fn is_degenerate(a: Vec3, b: Vec3, c: Vec3) -> bool {
+    if (b - a).cross(c - a) == Vec3::ZERO {
+        return true;
+    }
+    let (e1, e2) = ((b - a).as_dvec3(), (c - a).as_dvec3());
+    let limit = 4.0 * f32::EPSILON as f64;
+    e1.cross(e2).length_squared() <= limit * limit * e1.length_squared() * e2.length_squared()
 }
 
 #[cfg(test)]
