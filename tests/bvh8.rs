@@ -166,6 +166,34 @@ fn shared_edges_spheres_and_coherent_rays() {
 }
 
 #[test]
+fn watertight_kernels_match_the_scalar_reference() {
+    // Every kernel with the watertight test against the scalar reference (which uses the
+    // scalar watertight test on the same scene): soups, a shared-edge grid with spheres, and
+    // rays exactly through grid vertices and edges.
+    let opts = BuildOptions { watertight: true, ..BuildOptions::default() };
+    let soup = random_soup(3000, 0.08, 31);
+    let scene = scene_of(&[&soup], &[], &opts);
+    assert_eq!(scene.triangle_test(), raypack::geometry::TriangleTest::Watertight);
+    check_kernels(&scene, &random_rays(&scene, 30_000, 31), "watertight soup");
+    let g = grid(40, 40).map_positions(|p| p + Vec3::new(0.0, 0.0, -0.5));
+    let s = uv_sphere(30, 40).map_positions(|p| p * 0.4 + Vec3::new(0.3, 0.0, 0.2));
+    let scene = scene_of(&[&g, &s], &[(Vec3::new(-0.5, 0.5, 0.0), 0.3)], &opts);
+    let cam = camera_rays(&scene, 120, 90);
+    check_kernels(&scene, &cam, "watertight grid+sphere camera");
+    check_kernels(&scene, &shadow_rays(&scene, &cam), "watertight grid+sphere shadow");
+    let mut rays = Vec::new();
+    for p in &g.positions {
+        rays.push(Ray::new(*p + Vec3::new(0.0, 0.0, 2.0), -Vec3::Z));
+    }
+    for t in &g.indices {
+        let (a, b) = (g.positions[t[0] as usize], g.positions[t[1] as usize]);
+        rays.push(Ray::new((a + b) * 0.5 + Vec3::new(0.0, 0.0, 2.0), -Vec3::Z));
+    }
+    let hits = check_kernels(&scene, &rays, "watertight grid vertices and edges");
+    assert_eq!(hits, rays.len(), "every ray at a grid vertex or edge hits the grid");
+}
+
+#[test]
 fn invalid_rays_miss_in_every_kernel() {
     let scene = scene_of(&[&uv_sphere(20, 20)], &[(Vec3::ZERO, 0.5)], &BuildOptions::default());
     let good = Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z);

@@ -6,7 +6,10 @@ use raypack::bvh::node::NodeRef;
 use raypack::bvh::traverse_packet::{Frustum, PacketRays};
 use raypack::bvh::traverse1::Ray1;
 use raypack::geometry::tri_block::moller_trumbore;
-use raypack::geometry::{Sphere4, Tri4, Tri8, TriBlock, intersect_sphere, intersect_triangle};
+use raypack::geometry::{
+    Sphere4, Tri4, Tri8, TriBlock, TriangleKernel, WatertightKernel, intersect_sphere, intersect_triangle,
+    intersect_triangle_watertight,
+};
 use raypack::simd::{F32x4, F32x8, F32x16, Lanes, Vec3x};
 use raypack::{Aabb, Ray, Vec3};
 
@@ -128,6 +131,38 @@ proptest! {
             let w = intersect_triangle(r.origin, r.dir, r.tnear, r.tfar, t[0], t[1], t[2]);
             let got = (mask >> i & 1 == 1).then(|| (tt.lane(i).to_bits(), u.lane(i).to_bits(), v.lane(i).to_bits()));
             prop_assert_eq!(got, w.map(|(a, b, c)| (a.to_bits(), b.to_bits(), c.to_bits())), "lane {}", i);
+        }
+    }
+
+    /// The watertight kernel: one ray vs a block (vertex layout), 16 rays vs one triangle and
+    /// the scalar twin, bit-identical; padding lanes never hit.
+    #[test]
+    fn watertight_kernels_match_scalar(rays in prop::collection::vec(ray(), 16), tris in prop::collection::vec(triangle(), 1..=8)) {
+        let mut b8 = Tri8::EMPTY;
+        for (i, t) in tris.iter().enumerate() {
+            b8.set_vertices(i, t[0], t[1], t[2], i as u32);
+        }
+        let bits = |x: Option<(f32, f32, f32)>| x.map(|(a, b, c)| (a.to_bits(), b.to_bits(), c.to_bits()));
+        for r in rays.iter().filter(|r| r.is_valid()) {
+            let pre = WatertightKernel::ray1::<F32x8>(r);
+            let h = WatertightKernel::block(&b8, &pre, F32x8::splat(r.tnear), F32x8::splat(r.tfar));
+            for (i, t) in tris.iter().enumerate() {
+                let want = intersect_triangle_watertight(r.origin, r.dir, r.tnear, r.tfar, t[0], t[1], t[2]);
+                let got = (h.mask >> i & 1 == 1).then(|| (h.t.lane(i), h.u.lane(i), h.v.lane(i)));
+                prop_assert_eq!(bits(got), bits(want), "block lane {}", i);
+            }
+            prop_assert_eq!(h.mask >> tris.len(), 0, "padding lanes never hit");
+        }
+        let row = |f: &dyn Fn(&Ray) -> f32| F32x16::new(std::array::from_fn(|i| f(&rays[i])));
+        let o = Vec3x { x: row(&|r| r.origin.x), y: row(&|r| r.origin.y), z: row(&|r| r.origin.z) };
+        let d = Vec3x { x: row(&|r| r.dir.x), y: row(&|r| r.dir.y), z: row(&|r| r.dir.z) };
+        let pre = WatertightKernel::ray_k(&o, &d);
+        let t = tris[0];
+        let (m, tt, u, v) = WatertightKernel::broadcast(&t, &pre, row(&|r| r.tnear), row(&|r| r.tfar));
+        for (i, r) in rays.iter().enumerate().filter(|(_, r)| r.is_valid()) {
+            let want = intersect_triangle_watertight(r.origin, r.dir, r.tnear, r.tfar, t[0], t[1], t[2]);
+            let got = (m.bitmask() >> i & 1 == 1).then(|| (tt.lane(i), u.lane(i), v.lane(i)));
+            prop_assert_eq!(bits(got), bits(want), "packet lane {}", i);
         }
     }
 
