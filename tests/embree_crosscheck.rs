@@ -579,3 +579,38 @@ fn third_party_scenes_agree_with_embree() {
     eprintln!("crosscheck third-party scenes: {total} rays compared");
     assert!(failures.is_empty(), "{} failures:\n{}", failures.len(), failures.join("\n"));
 }
+
+/// The watertight triangle test (`BuildOptions::watertight`) in every raypack kernel against
+/// Embree built with `RTC_SCENE_FLAG_ROBUST` (its watertight mode), on the generated shared-edge
+/// and sliver scenes and, when `RAYPACK_SCENES` is set, the Stanford dragon.
+#[test]
+fn watertight_agrees_with_robust_embree() {
+    let opts = BuildOptions { watertight: true, ..BuildOptions::default() };
+    let with = |meshes: &[&Mesh]| {
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::diffuse(Vec3::splat(0.5)));
+        for mesh in meshes {
+            b.add_mesh(&mesh.positions, &mesh.indices, m).expect("valid mesh");
+        }
+        b.commit(&opts).0
+    };
+    let ground = grid(200, 200);
+    let ball = uv_sphere(120, 160).map_positions(|p| p * 0.5 + Vec3::new(0.1, -0.2, 0.55));
+    let floor = grid(100, 100).map_positions(|p| p * 1.5 + Vec3::new(0.0, 0.0, -1.3));
+    let mut scenes = vec![
+        ("watertight grid+sphere".to_string(), with(&[&ground, &ball]), (400, 300)),
+        ("watertight slivers".to_string(), with(&[&slivers(40_000, 5), &floor]), (400, 300)),
+    ];
+    if let Some(root) = common::scenes_dir("watertight_agrees_with_robust_embree (dragon)") {
+        let path = root.join("models/stanford-dragon-871k.ply");
+        let builder = raypack::io::load_scene(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        scenes.push(("watertight dragon".to_string(), builder.commit(&opts).0, (320, 240)));
+    }
+    let mut failures = Vec::new();
+    for (name, scene, res) in &scenes {
+        assert_eq!(scene.triangle_test(), raypack::geometry::TriangleTest::Watertight);
+        let sets = ray_sets(scene, *res, 100_000, 50_000);
+        failures.extend(crosscheck(name, scene, &sets, true).0);
+    }
+    assert!(failures.is_empty(), "{} failures:\n{}", failures.len(), failures.join("\n"));
+}
