@@ -94,6 +94,8 @@ fn hostile_rays(scene: &Scene, base: &[Ray]) -> Vec<(String, Ray)> {
         push("origin 1e18 away".into(), Ray::new(c - r.dir.normalize() * 1e18, r.dir));
         push("origin at 1e18".into(), Ray::new(Vec3::splat(1e18), c - Vec3::splat(1e18)));
         push("direction * 1e18".into(), Ray { dir: r.dir * 1e18, ..r });
+        // |dir| radius > 1.8e19: the sphere test's sqrt(|dir|² disc) overflows.
+        push("direction * 1e20".into(), Ray { dir: r.dir * 1e20, ..r });
         push("direction * 1e-30".into(), Ray { dir: r.dir * 1e-30, ..r });
         push("direction 1e-40 (subnormal)".into(), Ray { dir: r.dir.normalize() * 1e-40, ..r });
         push("tfar = f32::MAX".into(), Ray { tfar: f32::MAX, ..r });

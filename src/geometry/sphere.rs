@@ -26,9 +26,11 @@ pub fn intersect_sphere(origin: Vec3, dir: Vec3, tnear: f32, tfar: f32, center: 
     if t0 > t1 {
         std::mem::swap(&mut t0, &mut t1);
     }
-    if t0 > tnear && t0 <= tfar {
+    // `t < inf`: `sqrt(a disc)` overflows when `|dir| radius` exceeds ~1.8e19, and the root
+    // at infinity is no hit.
+    if t0 > tnear && t0 <= tfar && t0 < f32::INFINITY {
         Some(t0)
-    } else if t1 > tnear && t1 <= tfar {
+    } else if t1 > tnear && t1 <= tfar && t1 < f32::INFINITY {
         Some(t1)
     } else {
         None

@@ -36,8 +36,9 @@ pub fn sphere_lanes<V: Lanes>(
     let (t0, t1) = (c / q, q / a);
     let swap = t0.gt(t1);
     let (near, far) = (swap.select(t1, t0), swap.select(t0, t1));
-    let near_ok = near.gt(tnear) & near.le(tfar);
-    let far_ok = far.gt(tnear) & far.le(tfar);
+    let inf = V::splat(f32::INFINITY);
+    let near_ok = near.gt(tnear) & near.le(tfar) & near.lt(inf);
+    let far_ok = far.gt(tnear) & far.le(tfar) & far.lt(inf);
     let t = near_ok.select(near, far);
     (disc_ok & (near_ok | far_ok), t)
 }

@@ -84,7 +84,7 @@ pub fn moller_trumbore<V: Lanes>(
     let u = uu * inv_det;
     let v = vv * inv_det;
     let mut t = tt * inv_det;
-    let inside = u.ge(zero) & u.le(one) & !v.lt(zero) & !(u + v).gt(one);
+    let inside = u.ge(zero) & u.le(one) & v.ge(zero) & !(u + v).gt(one);
     let overflow = (det_ok & inside & !t.is_finite()).bitmask();
     if overflow != 0 {
         // Rare: the dot product overflowed (origin ~1e13 or more away); redo it in f64.

@@ -46,7 +46,8 @@ pub fn intersect_triangle_edges(
     }
     let q = s.cross(e1);
     let v = dir.dot(q) * inv_det;
-    if v < 0.0 || u + v > 1.0 {
+    // `!(v >= 0)` rather than `v < 0`: a NaN `v` (from an overflowing `dir · q`) is no hit.
+    if !(v >= 0.0) || u + v > 1.0 {
         return None;
     }
     let mut t = e2.dot(q) * inv_det;
