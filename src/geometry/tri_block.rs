@@ -181,6 +181,13 @@ pub enum TriangleTest {
     MollerTrumbore,
     /// Woop, Benthin and Wald's watertight test ([`crate::geometry::watertight`]): blocks
     /// store the exact vertices `v0`, `v1`, `v2`. No ray slips through a shared edge or vertex.
+    ///
+    /// Cost, measured with `examples/triangle_test_cost.rs` under callgrind (Stanford dragon,
+    /// 871k triangles, `raypack bench`'s primary, diffuse and shadow rays at 512 x 384, 265k
+    /// rays, one thread, AVX2 build): single-ray kernels 196.0M against 174.2M instructions
+    /// (+12.5%), 16-ray packet streams 267.1M against 255.3M (+4.6%). Memory: none (the same
+    /// 40 bytes per triangle). The per-ray shear is computed once per ray (packets: per lane,
+    /// with lane selects for the axis permutation).
     Watertight,
 }
 
