@@ -25,6 +25,7 @@
 //! `store` and a `CacheFile::section` call in `read_accel`.
 
 use crate::bvh::{BuildOptions, Bvh2, Bvh2Node, Bvh8, Bvh8Node, DefaultTriBlock, LeafKind, MAX_DEPTH};
+use crate::geometry::TriangleTest;
 use crate::geometry::{Sphere4, Tri8, TriBlock};
 use crate::math::Aabb;
 use crate::scene::{CommitReport, Scene, SceneBuilder};
@@ -35,7 +36,7 @@ use xxhash_rust::xxh3::Xxh3;
 
 /// Version of the file layout and of everything the key does not see; bump it whenever the
 /// builder, the collapse or a block layout changes what a given key would produce.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 /// First eight bytes of every cache file (the `\r\n` catches text-mode mangling, as PNG's does).
 pub const MAGIC: [u8; 8] = *b"RPKBVH\r\n";
 /// File name extension of cache files.
@@ -210,7 +211,9 @@ impl SceneBuilder {
         let num_prims = kept.triangles.len() + kept.spheres.len();
         let mut cache = CacheReport { path: path.clone(), loaded: false, rejected: None, write_error: None };
         match load(&path, key, num_prims) {
-            Ok(Some(accel)) => {
+            Ok(Some(mut accel)) => {
+                // The key covers `opts`, so the file's blocks are laid out for its triangle test.
+                accel.bvh8.test = TriangleTest::from_watertight(opts.watertight);
                 cache.loaded = true;
                 return (kept.with_accel(accel.bounds, accel.bvh2, accel.bvh8), report, cache);
             }
@@ -463,6 +466,8 @@ fn read_accel(f: &CacheFile) -> Result<Accel, CacheError> {
             nodes: f.section::<Bvh8Node>("bvh8.nodes")?,
             tris: f.section::<DefaultTriBlock>("bvh8.tris")?,
             spheres: f.section::<Sphere4>("bvh8.spheres")?,
+            // Set from the options by the caller (the key covers them).
+            test: TriangleTest::default(),
         },
     })
 }
