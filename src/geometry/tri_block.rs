@@ -368,7 +368,7 @@ macro_rules! tri_block {
     ($(#[$doc:meta])* $name:ident, $m:expr, $v:ty, $align:expr, $size:expr) => {
         $(#[$doc])*
         #[repr(C, align($align))]
-        #[derive(Clone, Copy, Debug, PartialEq)]
+        #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
         pub struct $name {
             /// `v0` as rows `[x; M], [y; M], [z; M]`.
             pub v0: [[f32; $m]; 3],

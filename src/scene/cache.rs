@@ -42,14 +42,6 @@ pub const MAGIC: [u8; 8] = *b"RPKBVH\r\n";
 /// File name extension of cache files.
 pub const EXTENSION: &str = "rpbvh";
 
-// SAFETY: `Tri8` (src/geometry/tri_block.rs) is `#[repr(C, align(64))]` with fields
-// `[[f32; 8]; 3]` x 3 and `[u32; 8]`: 288 + 32 = 320 bytes, which its own assertion and the
-// one below pin as its size, so it has no padding; every bit pattern of `f32`/`u32` is valid,
-// and it is `Copy + 'static`. (A `#[derive(Pod)]` in tri_block.rs would say the same; that
-// file belongs to other work at the time of writing.)
-unsafe impl bytemuck::Zeroable for Tri8 {}
-// SAFETY: see the `Zeroable` impl above.
-unsafe impl bytemuck::Pod for Tri8 {}
 const _: () = assert!(std::mem::size_of::<Tri8>() == 3 * 3 * 8 * 4 + 8 * 4);
 
 /// The content hash a cache file is named and checked by.
