@@ -161,7 +161,7 @@ impl<T: TriBlock> Bvh8<T> {
 
     /// The primitive ids held by leaf `r`, padding lanes excluded.
     pub fn leaf_prims(&self, r: NodeRef) -> Vec<u32> {
-        let range = r.first_block()..r.first_block() + r.block_count();
+        let range = r.blocks();
         match r.kind() {
             LeafKind::Triangles => {
                 self.tris[range].iter().flat_map(|b| (0..T::M).map(|l| b.prim(l))).filter(|&p| p != u32::MAX).collect()

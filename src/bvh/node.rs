@@ -99,6 +99,12 @@ impl NodeRef {
         ((self.0 >> 32) & 0xFFFF) as usize
     }
 
+    /// Indices of a leaf's blocks in the block array.
+    #[inline(always)]
+    pub fn blocks(self) -> std::ops::Range<usize> {
+        self.first_block()..self.first_block() + self.block_count()
+    }
+
     /// Used lanes of block `k` of a leaf (all lanes but in the last block).
     #[inline(always)]
     pub fn lanes_of_block(self, k: usize, m: usize) -> usize {

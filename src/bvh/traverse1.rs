@@ -233,7 +233,7 @@ impl<T: TriBlock> Bvh8<T> {
         tfar: &mut f32,
         hit: &mut Hit,
     ) {
-        let range = leaf.first_block()..leaf.first_block() + leaf.block_count();
+        let range = leaf.blocks();
         count!(LEAVES, 1);
         count!(BLOCKS, leaf.block_count());
         match leaf.kind() {
@@ -312,7 +312,7 @@ impl<T: TriBlock> Bvh8<T> {
                     }
                     cur = node.children[first];
                 }
-                let range = cur.first_block()..cur.first_block() + cur.block_count();
+                let range = cur.blocks();
                 count!(LEAVES, 1);
                 match cur.kind() {
                     LeafKind::Triangles => {

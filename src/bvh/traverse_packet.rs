@@ -207,7 +207,7 @@ impl<V: Lanes> PacketRays<V> {
     /// closest hits.
     #[inline(always)]
     fn intersect_spheres<T: TriBlock>(&mut self, bvh: &Bvh8<T>, leaf: NodeRef, active: V) {
-        let range = leaf.first_block()..leaf.first_block() + leaf.block_count();
+        let range = leaf.blocks();
         for (k, block) in bvh.spheres[range].iter().enumerate() {
             for lane in 0..leaf.lanes_of_block(k, 4) {
                 let c = Vec3x::splat(block.center(lane));
@@ -240,17 +240,10 @@ impl<V: Lanes> PacketRays<V> {
             self.intersect_spheres(bvh, leaf, V::from_bitmask(active));
             return;
         }
-        let range = leaf.first_block()..leaf.first_block() + leaf.block_count();
+        let range = leaf.blocks();
         let act = V::from_bitmask(active);
         for (k, block) in bvh.tris[range].iter().enumerate() {
-            let lanes = leaf.lanes_of_block(k, T::M);
-            let mut todo = (1u32 << lanes) - 1;
-            if TRIANGLE_CULL && lanes >= 4 {
-                if let Some(f) = fr {
-                    todo &= f.intersect_triangles_in(block, K::TEST);
-                }
-            }
-            count!(PACKET_TRI_TESTS, todo.count_ones());
+            let todo = lanes_to_test::<T, K>(leaf, k, block, fr);
             for lane in crate::simd::bits(todo) {
                 let (m, t, u, v) = K::broadcast(&block.lane_rows(lane), pre, self.tnear, self.tfar);
                 let m = m & act;
@@ -276,18 +269,11 @@ impl<V: Lanes> PacketRays<V> {
         pre: &K::RayK<V>,
     ) -> u32 {
         let mut occ = 0u32;
-        let range = leaf.first_block()..leaf.first_block() + leaf.block_count();
+        let range = leaf.blocks();
         match leaf.kind() {
             LeafKind::Triangles => {
                 for (k, block) in bvh.tris[range].iter().enumerate() {
-                    let lanes = leaf.lanes_of_block(k, T::M);
-                    let mut todo = (1u32 << lanes) - 1;
-                    if TRIANGLE_CULL && lanes >= 4 {
-                        if let Some(f) = fr {
-                            todo &= f.intersect_triangles_in(block, K::TEST);
-                        }
-                    }
-                    count!(PACKET_TRI_TESTS, todo.count_ones());
+                    let todo = lanes_to_test::<T, K>(leaf, k, block, fr);
                     for lane in crate::simd::bits(todo) {
                         let rows = block.lane_rows(lane);
                         let (m, ..) = K::broadcast(&rows, pre, self.tnear, self.tfar);
@@ -472,6 +458,21 @@ pub struct OccluderCache {
 
 /// Packet leaves: skip triangles whose (padded) boxes the frustum misses.
 const TRIANGLE_CULL: bool = true;
+
+/// Bit mask of the lanes of `block` (block `k` of `leaf`) a packet tests: the used lanes,
+/// less the triangles the frustum `fr` misses (when culling applies to a block this full).
+#[inline(always)]
+fn lanes_to_test<T: TriBlock, K: TriangleKernel>(leaf: NodeRef, k: usize, block: &T, fr: Option<&Frustum>) -> u32 {
+    let lanes = leaf.lanes_of_block(k, T::M);
+    let mut todo = (1u32 << lanes) - 1;
+    if TRIANGLE_CULL && lanes >= 4 {
+        if let Some(f) = fr {
+            todo &= f.intersect_triangles_in(block, K::TEST);
+        }
+    }
+    count!(PACKET_TRI_TESTS, todo.count_ones());
+    todo
+}
 
 /// Test a node's leaf children before descending into its inner children (any hit only).
 const LEAVES_FIRST: bool = true;

@@ -89,7 +89,7 @@ pub fn validate_bvh8<T: crate::geometry::TriBlock>(
                 stack.push((k, depth + 1));
                 continue;
             }
-            let end = c.first_block() + c.block_count();
+            let end = c.blocks().end;
             let in_range = match c.kind() {
                 crate::bvh::LeafKind::Triangles => end <= bvh.tris.len(),
                 crate::bvh::LeafKind::Spheres => end <= bvh.spheres.len(),
