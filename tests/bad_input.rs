@@ -2,29 +2,18 @@
 //! never a panic, a hang or a silently wrong image. Library-level checks call the loaders;
 //! CLI-level checks run the `raypack` binary and expect exit code 2.
 
-use raypack::io::{LoadError, SceneFormat, load_scene, load_scene_from_bytes};
+use raypack::io::{LoadError, load_scene};
 use raypack::{BuildOptions, Vec3};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 const CORNELL: &str = include_str!("../scenes/cornell.dae");
 
-fn load_bytes(bytes: &[u8], name: &str) -> Result<raypack::SceneBuilder, LoadError> {
-    let format = SceneFormat::from_path(Path::new(name)).expect("known extension");
-    load_scene_from_bytes(bytes, format, Path::new(name)).map(|(b, _)| b)
-}
+mod common;
+use common::expect_error;
 
-/// Loads `bytes` as `name`, expects an error and returns its text, checking it names the file
-/// and the given location fragment.
-fn expect_error(bytes: &[u8], name: &str, location: &str) -> String {
-    let e = match load_bytes(bytes, name) {
-        Ok(_) => panic!("{name}: loaded, but an error naming {location:?} was expected"),
-        Err(e) => e,
-    };
-    let text = e.to_string();
-    assert!(text.starts_with(name), "error does not name the file first: {text}");
-    assert!(e.location().is_some_and(|l| l.contains(location)), "error does not name {location:?}: {text}");
-    text
+fn load_bytes(bytes: &[u8], name: &str) -> Result<raypack::SceneBuilder, LoadError> {
+    common::load_named(bytes, name).map(|(b, _)| b)
 }
 
 fn raypack(args: &[&str]) -> (i32, String) {

@@ -4,27 +4,12 @@
 //! up as a timed-out or killed test run, not as a wrong answer.
 
 use raypack::io::obj::parse_obj;
-use raypack::io::{LoadError, SceneFormat, load_scene_from_bytes};
+
 use raypack::{BuildOptions, Material, Ray, SceneBuilder, Vec3};
 use std::path::Path;
 
-fn load(bytes: &[u8], name: &str) -> Result<(SceneBuilder, Vec<String>), LoadError> {
-    let format = SceneFormat::from_path(Path::new(name)).expect("known extension");
-    load_scene_from_bytes(bytes, format, Path::new(name))
-}
-
-/// Loads `bytes` as `name`, expects a parse error naming the file first and `location`, and
-/// returns its text.
-fn expect_error(bytes: &[u8], name: &str, location: &str) -> String {
-    let e = match load(bytes, name) {
-        Ok(_) => panic!("{name}: loaded, but an error naming {location:?} was expected"),
-        Err(e) => e,
-    };
-    let text = e.to_string();
-    assert!(text.starts_with(name), "error does not name the file first: {text}");
-    assert!(e.location().is_some_and(|l| l.contains(location)), "error does not name {location:?}: {text}");
-    text
-}
+mod common;
+use common::{expect_error, load_named as load};
 
 /// A COLLADA document with the given libraries and visual-scene nodes.
 fn dae(libraries: &str, nodes: &str) -> String {

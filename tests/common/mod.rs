@@ -47,3 +47,24 @@ pub fn scenes_dir(test: &str) -> Option<PathBuf> {
         }
     }
 }
+
+/// Loads `bytes` as a file called `name` (its extension picks the format): the builder and
+/// the loader's warnings.
+pub fn load_named(bytes: &[u8], name: &str) -> Result<(SceneBuilder, Vec<String>), raypack::io::LoadError> {
+    use raypack::io::{SceneFormat, load_scene_from_bytes};
+    let path = std::path::Path::new(name);
+    load_scene_from_bytes(bytes, SceneFormat::from_path(path).expect("known extension"), path)
+}
+
+/// Loads `bytes` as `name`, expects an error naming the file first and `location`, and
+/// returns its text.
+pub fn expect_error(bytes: &[u8], name: &str, location: &str) -> String {
+    let e = match load_named(bytes, name) {
+        Ok(_) => panic!("{name}: loaded, but an error naming {location:?} was expected"),
+        Err(e) => e,
+    };
+    let text = e.to_string();
+    assert!(text.starts_with(name), "error does not name the file first: {text}");
+    assert!(e.location().is_some_and(|l| l.contains(location)), "error does not name {location:?}: {text}");
+    text
+}
