@@ -65,6 +65,7 @@ unsafe extern "C" {
         num_triangles: usize,
         quality: c_int,
         flags: c_int,
+        threads: c_int,
         error: *mut *const c_char,
     ) -> *mut RpEmbree;
     fn rp_embree_commit(e: *mut RpEmbree) -> c_int;
@@ -111,11 +112,15 @@ pub struct EmbreeOptions {
     /// `RTC_SCENE_FLAG_ROBUST`: conservative traversal and a watertight triangle test
     /// (slower). Off by default, as in Embree.
     pub robust: bool,
+    /// Worker threads of the Embree device, which builds the BVH (`threads=N` in the device
+    /// configuration); 0 (the default) uses every hardware thread. Queries run on the
+    /// caller's threads whatever this is.
+    pub threads: usize,
 }
 
 impl Default for EmbreeOptions {
     fn default() -> Self {
-        Self { quality: EmbreeQuality::Medium, robust: false }
+        Self { quality: EmbreeQuality::Medium, robust: false, threads: 0 }
     }
 }
 
@@ -239,6 +244,7 @@ impl EmbreeScene {
                 indices.len(),
                 quality,
                 flags,
+                options.threads.min(c_int::MAX as usize) as c_int,
                 &mut error,
             )
         };

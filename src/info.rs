@@ -19,6 +19,9 @@ pub struct InfoOptions {
     pub cache_dir: Option<PathBuf>,
     /// Check the structural invariants of both BVHs after each build.
     pub validate: bool,
+    /// Also build Embree's BVH (MEDIUM and HIGH) over the same triangles, on as many threads
+    /// as the caller's rayon pool has (needs the `embree` feature).
+    pub against_embree: bool,
 }
 
 impl Default for InfoOptions {
@@ -27,6 +30,7 @@ impl Default for InfoOptions {
             qualities: vec![BuildQuality::Fast, BuildQuality::Medium, BuildQuality::High],
             cache_dir: None,
             validate: false,
+            against_embree: false,
         }
     }
 }
@@ -51,6 +55,42 @@ pub struct BuildInfo {
     pub bvh2_bytes: usize,
     /// The result of `--validate`: `None` when not asked for.
     pub valid: Option<Result<(), String>>,
+    /// Peak resident memory the commit added to the process (see [`BuildPeak`]).
+    pub peak_added_bytes: Option<u64>,
+}
+
+/// Figures of one Embree build over the same triangles (`raypack info --against embree`).
+#[derive(Clone, Debug)]
+pub struct EmbreeBuildInfo {
+    /// `medium` or `high`.
+    pub quality: &'static str,
+    /// Wall-clock seconds of `rtcCommitScene`.
+    pub seconds: f64,
+    /// Bytes Embree holds for the BVH after the commit.
+    pub bytes: u64,
+    /// Peak resident memory the commit added to the process (see [`BuildPeak`]).
+    pub peak_added_bytes: Option<u64>,
+}
+
+/// Measures how much a step raises the process's peak resident memory: resets the kernel's
+/// high-water mark (`/proc/self/clear_refs`, Linux ≥ 4.0) and remembers the resident size;
+/// [`BuildPeak::added`] then gives the new high-water mark minus that size, i.e. the peak
+/// memory of the step, temporaries included. `None` where Linux's files are missing.
+pub struct BuildPeak {
+    resident_before: Option<u64>,
+}
+
+impl BuildPeak {
+    /// Starts a measurement.
+    pub fn start() -> Self {
+        let reset = std::fs::write("/proc/self/clear_refs", "5").is_ok();
+        Self { resident_before: if reset { proc_status_kib("VmRSS:").map(|k| k * 1024) } else { None } }
+    }
+
+    /// Peak bytes added since [`BuildPeak::start`].
+    pub fn added(&self) -> Option<u64> {
+        Some(peak_resident_bytes()?.saturating_sub(self.resident_before?))
+    }
 }
 
 /// Everything `raypack info` prints.
@@ -79,6 +119,8 @@ pub struct SceneInfo {
     pub store_bytes: usize,
     /// One entry per quality.
     pub builds: Vec<BuildInfo>,
+    /// Embree's builds of the same triangles (with `against_embree`).
+    pub embree_builds: Vec<EmbreeBuildInfo>,
     /// Peak resident memory of the process at the end ([`peak_resident_bytes`]).
     pub peak_resident_bytes: Option<u64>,
 }
@@ -104,15 +146,35 @@ pub fn bvh2_bytes(bvh: &Bvh2) -> usize {
 /// Peak resident set size of this process (`VmHWM` of `/proc/self/status`). Linux only:
 /// `None` elsewhere or when the file cannot be read.
 pub fn peak_resident_bytes() -> Option<u64> {
+    Some(proc_status_kib("VmHWM:")? * 1024)
+}
+
+/// A `kB` field of `/proc/self/status`.
+fn proc_status_kib(field: &str) -> Option<u64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kib: u64 = line["VmHWM:".len()..].trim().trim_end_matches("kB").trim().parse().ok()?;
-    Some(kib * 1024)
+    let line = status.lines().find(|l| l.starts_with(field))?;
+    line[field.len()..].trim().trim_end_matches("kB").trim().parse().ok()
+}
+
+/// Why [`scene_info`] failed.
+#[derive(Debug, thiserror::Error)]
+pub enum InfoError {
+    /// The scene could not be loaded.
+    #[error(transparent)]
+    Load(#[from] LoadError),
+    /// Embree could not build the scene, or this build has no Embree.
+    #[error("{0}")]
+    Embree(String),
 }
 
 /// Loads `path`, commits it at each quality of `opts` (through the cache when asked) and
 /// gathers the figures.
-pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, LoadError> {
+pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, InfoError> {
+    if opts.against_embree && !cfg!(feature = "embree") {
+        return Err(InfoError::Embree(
+            "--against embree: this raypack was built without Embree; rebuild with `cargo build --release --features embree` (needs the system package libembree-dev)".into(),
+        ));
+    }
     let t = Instant::now();
     let (builder, warnings) = crate::io::load_scene_with_warnings(path)?;
     let load_seconds = t.elapsed().as_secs_f64();
@@ -128,6 +190,7 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, LoadErro
         threads: rayon::current_num_threads(),
         store_bytes: 0,
         builds: Vec::new(),
+        embree_builds: Vec::new(),
         peak_resident_bytes: None,
     };
     let mut builder = Some(builder);
@@ -135,6 +198,7 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, LoadErro
         let last = i + 1 == opts.qualities.len();
         let b: SceneBuilder = if last { builder.take().expect("builder") } else { builder.clone().expect("builder") };
         let build_opts = BuildOptions { quality, ..BuildOptions::default() };
+        let peak = BuildPeak::start();
         let t = Instant::now();
         let (scene, report, cache) = match &opts.cache_dir {
             Some(dir) => {
@@ -147,6 +211,7 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, LoadErro
             }
         };
         let seconds = t.elapsed().as_secs_f64();
+        let peak_added_bytes = peak.added();
         info.report = report;
         info.bounds = scene.bounds();
         info.materials = scene.materials.len();
@@ -169,10 +234,38 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, LoadErro
             bvh8: scene.bvh8().stats(),
             bvh2_bytes: bvh2_bytes(scene.bvh2()),
             valid,
+            peak_added_bytes,
         });
+        if last && opts.against_embree {
+            info.embree_builds = embree_builds(&scene)?;
+        }
     }
     info.peak_resident_bytes = peak_resident_bytes();
     Ok(info)
+}
+
+/// Embree MEDIUM and HIGH builds of `scene`'s triangles on the current rayon pool's thread count.
+#[cfg(feature = "embree")]
+fn embree_builds(scene: &Scene) -> Result<Vec<EmbreeBuildInfo>, InfoError> {
+    use crate::embree::{EmbreeOptions, EmbreeQuality, EmbreeScene};
+    let mut out = Vec::new();
+    for quality in [EmbreeQuality::Medium, EmbreeQuality::High] {
+        let options = EmbreeOptions { quality, threads: rayon::current_num_threads(), ..EmbreeOptions::default() };
+        let peak = BuildPeak::start();
+        let e = EmbreeScene::with_options(scene, options).map_err(|e| InfoError::Embree(e.to_string()))?;
+        out.push(EmbreeBuildInfo {
+            quality: quality.name(),
+            seconds: e.build_time().as_secs_f64(),
+            bytes: e.bvh_bytes(),
+            peak_added_bytes: peak.added(),
+        });
+    }
+    Ok(out)
+}
+
+#[cfg(not(feature = "embree"))]
+fn embree_builds(_: &Scene) -> Result<Vec<EmbreeBuildInfo>, InfoError> {
+    Ok(Vec::new())
 }
 
 fn quality_name(q: BuildQuality) -> String {
@@ -228,6 +321,9 @@ impl SceneInfo {
                 mb(bi.bvh2_bytes),
                 self.per_triangle(bi.bvh2_bytes)
             );
+            if let Some(p) = bi.peak_added_bytes {
+                let _ = writeln!(s, "  peak       +{} resident during the commit", mb(p as usize));
+            }
             match &bi.valid {
                 Some(Ok(())) => {
                     let _ = writeln!(s, "  validate   ok");
@@ -237,6 +333,17 @@ impl SceneInfo {
                 }
                 None => {}
             }
+        }
+        for e in &self.embree_builds {
+            let _ = writeln!(
+                s,
+                "{:<12} {:.4} s, {} ({:.1} bytes/triangle), peak +{} resident",
+                format!("embree {}", e.quality),
+                e.seconds,
+                mb(e.bytes as usize),
+                self.per_triangle(e.bytes as usize),
+                e.peak_added_bytes.map_or("n/a".to_string(), |b| mb(b as usize))
+            );
         }
         let peak = self.peak_resident_bytes.map_or("n/a".to_string(), |b| mb(b as usize));
         let _ = writeln!(s, "peak memory  {peak} (resident, VmHWM; Linux only)");
@@ -277,6 +384,7 @@ impl SceneInfo {
                         "bytes_per_triangle": self.per_triangle(bi.bvh8.bytes),
                     },
                     "valid": bi.valid.as_ref().map(|v| v.clone().err().unwrap_or_else(|| "ok".into())),
+                    "peak_added_bytes": bi.peak_added_bytes,
                 })
             })
             .collect();
@@ -293,6 +401,13 @@ impl SceneInfo {
             "store_bytes": self.store_bytes,
             "store_bytes_per_triangle": self.per_triangle(self.store_bytes),
             "builds": builds,
+            "embree_builds": self.embree_builds.iter().map(|e| json!({
+                "quality": e.quality,
+                "seconds": e.seconds,
+                "bytes": e.bytes,
+                "bytes_per_triangle": self.per_triangle(e.bytes as usize),
+                "peak_added_bytes": e.peak_added_bytes,
+            })).collect::<Vec<_>>(),
             "peak_resident_bytes": self.peak_resident_bytes,
         })
     }

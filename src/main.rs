@@ -183,6 +183,9 @@ struct InfoArgs {
     /// Print the figures as JSON.
     #[arg(long)]
     json: bool,
+    /// Also time Embree's MEDIUM and HIGH builds of the same triangles on as many threads.
+    #[arg(long, value_enum)]
+    against: Option<AgainstArg>,
 }
 
 /// A failure the CLI reports: bad input or environment exits with 2, as issue #2 asks.
@@ -190,6 +193,8 @@ struct InfoArgs {
 enum CliError {
     #[error(transparent)]
     Load(#[from] LoadError),
+    #[error(transparent)]
+    Info(#[from] raypack::info::InfoError),
     #[error(transparent)]
     Image(#[from] render::ImageError),
     #[error(transparent)]
@@ -399,7 +404,12 @@ fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
     if a.threads == Some(0) {
         return Err(CliError::Usage("-t 0: need at least one thread".into()));
     }
-    let mut opts = InfoOptions { cache_dir: a.bvh_cache.clone(), validate: a.validate, ..InfoOptions::default() };
+    let mut opts = InfoOptions {
+        cache_dir: a.bvh_cache.clone(),
+        validate: a.validate,
+        against_embree: a.against.is_some(),
+        ..InfoOptions::default()
+    };
     if let Some(q) = a.quality {
         opts.qualities = vec![q.into()];
     }

@@ -454,7 +454,8 @@ fn compare_set(scene: &Scene, set: &RaySet, methods: &[Method<'_>]) -> BTreeMap<
 fn crosscheck(name: &str, scene: &Scene, sets: &[RaySet], robust: bool) -> (Vec<String>, usize) {
     let t0 = std::time::Instant::now();
     let build = |quality| {
-        EmbreeScene::with_options(scene, EmbreeOptions { quality, robust }).expect("Embree accepts the scene")
+        EmbreeScene::with_options(scene, EmbreeOptions { quality, robust, ..EmbreeOptions::default() })
+            .expect("Embree accepts the scene")
     };
     let (medium, high) = (build(EmbreeQuality::Medium), build(EmbreeQuality::High));
     let flags = if robust { ", robust" } else { "" };

@@ -4,6 +4,7 @@
 #include <embree3/rtcore.h>
 #include <math.h>
 #include <stdatomic.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -37,7 +38,8 @@ static const char* rp_error_string(enum RTCError code) {
 }
 
 RpEmbree* rp_embree_new(const float* positions, size_t num_vertices, const uint32_t* indices,
-                        size_t num_triangles, int quality, int flags, const char** error) {
+                        size_t num_triangles, int quality, int flags, int threads,
+                        const char** error) {
   const char* dummy;
   if (!error) error = &dummy;
   *error = NULL;
@@ -47,7 +49,10 @@ RpEmbree* rp_embree_new(const float* positions, size_t num_vertices, const uint3
     return NULL;
   }
   atomic_init(&e->bytes, 0);
-  e->device = rtcNewDevice(NULL);
+  /* threads = 0: Embree's default (all hardware threads). */
+  char config[64] = "";
+  if (threads > 0) snprintf(config, sizeof config, "threads=%d,set_affinity=0", threads);
+  e->device = rtcNewDevice(config);
   if (!e->device) {
     *error = rp_error_string(rtcGetDeviceError(NULL));
     if (!*error) *error = "Embree: rtcNewDevice failed";

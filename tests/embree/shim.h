@@ -45,10 +45,12 @@ typedef struct RpEmbree RpEmbree;
 
 /* Creates a device and a scene holding one triangle mesh: `positions` holds x, y, z of
  * `num_vertices` vertices, `indices` three vertex indices per triangle. Copies both (into
- * Embree-allocated, padded buffers). Returns NULL on failure and, when `error` is not NULL,
- * writes a static message there. */
+ * Embree-allocated, padded buffers). `threads` > 0 limits the device's worker threads (its
+ * builds and any internal parallelism) to that many; 0 uses all hardware threads. Returns
+ * NULL on failure and, when `error` is not NULL, writes a static message there. */
 RpEmbree* rp_embree_new(const float* positions, size_t num_vertices, const uint32_t* indices,
-                        size_t num_triangles, int quality, int flags, const char** error);
+                        size_t num_triangles, int quality, int flags, int threads,
+                        const char** error);
 
 /* Builds the BVH. Returns 0 on success, or an Embree error code (see rp_embree_error). */
 int rp_embree_commit(RpEmbree* e);
