@@ -40,7 +40,7 @@ fn build(c: &mut Criterion) {
     let mesh = torus_knot(2000, 50, 2.0, 3.0, 0.4, 0.1);
     let scene = scene_of(&mesh, &[]);
     let n = scene.num_prims();
-    let prims: Vec<BuildPrim> = (0..n as u32).map(|id| BuildPrim { bounds: scene.prim_bounds(id), id }).collect();
+    let prims: Vec<BuildPrim> = (0..n as u32).map(|id| BuildPrim::new(scene.prim_bounds(id), id)).collect();
     let mut g = c.benchmark_group("build/knot 200k");
     g.throughput(Throughput::Elements(n as u64)).sample_size(10);
     g.bench_function("binned SAH BVH2", |b| {
@@ -50,7 +50,9 @@ fn build(c: &mut Criterion) {
         })
     });
     g.bench_function("collapse to BVH8 (M=8)", |b| {
-        b.iter(|| -> Bvh8 { collapse(scene.bvh2(), |id| scene.prim_shape(id), &CollapseOptions::default()) })
+        b.iter(|| -> Bvh8 {
+            collapse(scene.bvh2(), |id| scene.prim_shape(id), scene.num_triangles() as u32, &CollapseOptions::default())
+        })
     });
     g.finish();
 }

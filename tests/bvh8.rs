@@ -235,8 +235,8 @@ fn bvh8_invariants_for_every_collapse() {
         let bounds = prim_bounds(&scene);
         for method in [CollapseMethod::Optimal, CollapseMethod::Greedy] {
             let opts = CollapseOptions { method, ..CollapseOptions::default() };
-            let b4: Bvh8<Tri4> = collapse(scene.bvh2(), |id| scene.prim_shape(id), &opts);
-            let b8: Bvh8<Tri8> = collapse(scene.bvh2(), |id| scene.prim_shape(id), &opts);
+            let b4: Bvh8<Tri4> = collapse(scene.bvh2(), |id| scene.prim_shape(id), scene.num_triangles() as u32, &opts);
+            let b8: Bvh8<Tri8> = collapse(scene.bvh2(), |id| scene.prim_shape(id), scene.num_triangles() as u32, &opts);
             validate_bvh8(&b4, &bounds).unwrap_or_else(|e| panic!("{what} {method:?} Tri4: {e}"));
             validate_bvh8(&b8, &bounds).unwrap_or_else(|e| panic!("{what} {method:?} Tri8: {e}"));
             // Both block widths and both collapses give the reference's hits.
@@ -265,10 +265,12 @@ fn bvh8_invariants_for_every_collapse() {
 fn optimal_collapse_beats_greedy_sah() {
     let soup = random_soup(20_000, 0.03, 8);
     let scene = scene_of(&[&soup], &[], &BuildOptions::default());
-    let opt: Bvh8<Tri4> = collapse(scene.bvh2(), |id| scene.prim_shape(id), &CollapseOptions::default());
+    let opt: Bvh8<Tri4> =
+        collapse(scene.bvh2(), |id| scene.prim_shape(id), scene.num_triangles() as u32, &CollapseOptions::default());
     let greedy: Bvh8<Tri4> = collapse(
         scene.bvh2(),
         |id| scene.prim_shape(id),
+        scene.num_triangles() as u32,
         &CollapseOptions { method: CollapseMethod::Greedy, ..Default::default() },
     );
     let (o, g) = (opt.stats(), greedy.stats());
@@ -276,4 +278,38 @@ fn optimal_collapse_beats_greedy_sah() {
     assert!(o.sah_cost <= g.sah_cost, "optimal {} > greedy {}", o.sah_cost, g.sah_cost);
     assert!(o.block_fill > g.block_fill);
     let _ = Tri8::M;
+}
+
+#[test]
+fn collapse_splits_leaves_that_mix_triangles_and_spheres() {
+    // The scene's builder never mixes kinds in a leaf; a binary BVH built without that rule
+    // (plain `build_bvh2`, large median-split leaves, spheres sitting on the grid) does, and the collapse
+    // must split those leaves rather than put spheres in triangle blocks.
+    use raypack::bvh::{BuildPrim, build_bvh2};
+    let g = grid(20, 20);
+    let spheres: Vec<(Vec3, f32)> =
+        (0..60).map(|i| (Vec3::new((i % 10) as f32 * 0.2 - 0.9, 0.0, (i / 10) as f32 * 0.3 - 0.9), 0.03)).collect();
+    let scene = scene_of(&[&g], &spheres, &BuildOptions::default());
+    let nt = scene.num_triangles() as u32;
+    let mut prims: Vec<BuildPrim> =
+        (0..scene.num_prims() as u32).map(|id| BuildPrim::new(scene.prim_bounds(id), id)).collect();
+    let opts = BuildOptions { max_leaf_size: 16, split: raypack::bvh::SplitMethod::Median, ..BuildOptions::default() };
+    let bvh2 = build_bvh2(&mut prims, &opts);
+    let mixed = bvh2.nodes.iter().filter(|n| n.is_leaf()).any(|n| {
+        let ids = &bvh2.prim_ids[n.start as usize..(n.start + n.count) as usize];
+        ids.iter().any(|&id| id < nt) && ids.iter().any(|&id| id >= nt)
+    });
+    assert!(mixed, "the test needs a leaf that mixes kinds");
+    let bounds = prim_bounds(&scene);
+    for method in [CollapseMethod::Optimal, CollapseMethod::Greedy] {
+        let opts = CollapseOptions { method, ..CollapseOptions::default() };
+        let b: Bvh8<Tri8> = collapse(&bvh2, |id| scene.prim_shape(id), nt, &opts);
+        validate_bvh8(&b, &bounds).unwrap_or_else(|e| panic!("{method:?}: {e}"));
+        assert!(!b.spheres.is_empty());
+        for r in random_rays(&scene, 3000, 5) {
+            let want = scene.intersect1_reference(&r);
+            assert_eq!(b.intersect1(&r).t.to_bits(), want.t.to_bits(), "{method:?}");
+            assert_eq!(b.occluded1(&r), want.is_hit(), "{method:?}");
+        }
+    }
 }

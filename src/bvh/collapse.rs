@@ -14,8 +14,8 @@
 //!
 //! Binary leaves are atomic (never split), so leaves hold at most `max(binary leaf size,
 //! max_leaf_prims)` primitives. A binary leaf holding both triangles and spheres is split by
-//! kind into two virtual leaves first (their padded boxes stay inside the parent's, because
-//! [`pad_outward`] is monotone). The greedy alternative (repeatedly open the child of largest
+//! kind into two leaves first (their padded boxes stay inside the parent's, because
+//! [`pad_outward`] is monotone); the scene's builder makes no such leaves. The greedy alternative (repeatedly open the child of largest
 //! area, as Embree's BVH8 builder does) is kept for comparison: on the Stanford dragon
 //! (871k triangles, M = 4, 1 thread, best of 7, Mrays/s, single-ray kernel) it gives SAH cost
 //! 17.4 against 16.0, 46% against 71% of block lanes used, 130 against 71 bytes per triangle,
@@ -24,9 +24,12 @@
 
 use crate::bvh::build_sah::pad_outward;
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
-use crate::bvh::{Bvh2, Bvh8};
+use crate::bvh::{Bvh2, Bvh2Node, Bvh8};
 use crate::geometry::{Sphere4, TriBlock, TriangleTest};
 use crate::math::{Aabb, Vec3};
+use std::borrow::Cow;
+use std::sync::atomic::Ordering::Relaxed;
+use std::sync::atomic::{AtomicU32, AtomicU64};
 
 /// The shape of one primitive, as the collapse needs it to fill leaf blocks.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -82,97 +85,414 @@ impl Default for CollapseOptions {
     }
 }
 
-/// A node of the intermediate binary tree: the BVH2 with mixed leaves split by kind.
-#[derive(Clone, Copy, Debug)]
-struct CNode {
-    bounds: Aabb,
-    /// Children (inner nodes), or `u32::MAX` for leaves.
-    left: u32,
-    right: u32,
-    /// The subtree's primitives are `ids[start .. start + ntri + nsph]`.
-    start: u32,
-    ntri: u32,
-    nsph: u32,
+/// Most primitives a subtree may have for the emission to defer it to a parallel task is
+/// `max(total / PARALLEL_EMIT_DIVISOR, 1)`: at least this many tasks for load balance, and
+/// independent of the thread count, so the output is too.
+const PARALLEL_EMIT_DIVISOR: u32 = 64;
+/// The dynamic program runs children in parallel (`rayon::join`) down to this depth.
+const PARALLEL_PLAN_DEPTH: usize = 10;
+
+/// The dynamic program's decisions for one binary node, packed into 60 bits of a `u64`:
+///
+/// * bit 0: as a single forest root, a leaf (1) or an 8-wide node (0);
+/// * bits 1–3: as an 8-wide node, the slots given to the left child's forest (the right
+///   child's forest gets the rest of the 8);
+/// * bits 4 + 7j .. 4 + 7j + 7, for `j` in `0..8`: the best forest of at most `j + 1`
+///   roots, as the slots given to the left child (3 bits; 0 keeps the node as a single
+///   root) and the slots used minus 1 (3 bits).
+///
+/// Stored in relaxed atomics so that the parallel dynamic program can write each node's
+/// plan from whichever task handles it, without `unsafe`; on x86 these are plain loads and
+/// stores.
+#[derive(Clone, Copy, Debug, Default)]
+struct Plan(u64);
+
+impl Plan {
+    fn as_leaf(self) -> bool {
+        self.0 & 1 != 0
+    }
+    fn node_split(self) -> usize {
+        (self.0 >> 1 & 7) as usize
+    }
+    /// `(slots to the left child, slots used)` of the best forest of at most `slots` roots.
+    fn forest(self, slots: usize) -> (usize, usize) {
+        let f = self.0 >> (4 + 7 * (slots - 1));
+        ((f & 7) as usize, (f >> 3 & 7) as usize + 1)
+    }
+    fn new(as_leaf: bool, node_split: usize, forest: &[(usize, usize); 8]) -> Plan {
+        let mut bits = as_leaf as u64 | (node_split as u64) << 1;
+        for (j, &(k, used)) in forest.iter().enumerate() {
+            bits |= (k as u64 | ((used - 1) as u64) << 3) << (4 + 7 * j);
+        }
+        Plan(bits)
+    }
 }
 
-impl CNode {
-    fn is_leaf(&self) -> bool {
-        self.left == u32::MAX
+/// The binary tree with its per-node plans and primitive counts, ready for emission.
+struct Planned<'a> {
+    bvh2: &'a Bvh2,
+    first_sphere: u32,
+    plans: Vec<AtomicU64>,
+    /// Primitives below each node.
+    counts: Vec<AtomicU32>,
+}
+
+impl Planned<'_> {
+    fn plan(&self, n: usize) -> Plan {
+        Plan(self.plans[n].load(Relaxed))
     }
-    fn count(&self) -> u32 {
-        self.ntri + self.nsph
+    fn count(&self, n: usize) -> u32 {
+        self.counts[n].load(Relaxed)
+    }
+    fn children(&self, n: usize) -> (usize, usize) {
+        let s = self.bvh2.nodes[n].start as usize;
+        (s, s + 1)
+    }
+    /// First primitive of `n`'s subtree in `prim_ids` (a subtree's primitives are
+    /// contiguous there): the start of its leftmost leaf.
+    fn first_prim(&self, mut n: usize) -> usize {
+        while !self.bvh2.nodes[n].is_leaf() {
+            n = self.bvh2.nodes[n].start as usize;
+        }
+        self.bvh2.nodes[n].start as usize
     }
 }
 
-struct Binary {
-    nodes: Vec<CNode>,
-    ids: Vec<u32>,
-}
-
-/// Converts the BVH2 into the intermediate tree (pre-order: children after parents).
-fn binary_tree(bvh2: &Bvh2, shape: &(impl Fn(u32) -> PrimShape + Sync)) -> Binary {
-    let mut out = Binary { nodes: Vec::with_capacity(bvh2.nodes.len() + 16), ids: bvh2.prim_ids.clone() };
-    if bvh2.is_empty() {
-        return out;
+/// Runs the dynamic program bottom-up over `n`'s subtree, storing each node's [`Plan`] and
+/// primitive count; returns `(C(n, 1..=8), triangles, spheres)` of the subtree.
+fn plan_rec(p: &Planned, opts: &CollapseOptions, block_m: u32, n: usize, depth: usize) -> ([f32; 8], u32, u32) {
+    let node = p.bvh2.nodes[n];
+    let area = node.bounds.half_area();
+    let blocks = |ntri: u32, nsph: u32| ntri.div_ceil(block_m) + nsph.div_ceil(Sphere4::M as u32);
+    let leaf_cost = |ntri: u32, nsph: u32| {
+        area * (opts.block_cost * blocks(ntri, nsph) as f32 + opts.prim_cost * (ntri + nsph) as f32)
+    };
+    if node.is_leaf() {
+        // Leaves hold one kind (`pure_leaves`).
+        let first = p.bvh2.prim_ids.get(node.start as usize).copied().unwrap_or(0);
+        let (ntri, nsph) = if first < p.first_sphere { (node.count, 0) } else { (0, node.count) };
+        p.plans[n].store(Plan::new(true, 0, &[(0, 1); 8]).0, Relaxed);
+        p.counts[n].store(node.count, Relaxed);
+        return ([leaf_cost(ntri, nsph); 8], ntri, nsph);
     }
-    let is_sphere = |id: u32| matches!(shape(id), PrimShape::Sphere(..));
-    fn rec(bvh2: &Bvh2, n: usize, out: &mut Binary, is_sphere: &dyn Fn(u32) -> bool, shape: &dyn Fn(u32) -> PrimShape) {
-        let node = bvh2.nodes[n];
-        let me = out.nodes.len();
-        out.nodes.push(CNode { bounds: node.bounds, left: u32::MAX, right: u32::MAX, start: 0, ntri: 0, nsph: 0 });
-        if node.is_leaf() {
-            let (s, c) = (node.start as usize, node.count as usize);
-            let ids = &mut out.ids[s..s + c];
-            // Triangles first, then spheres, each in their original order.
-            ids.sort_by_key(|&id| is_sphere(id));
-            let nsph = ids.iter().filter(|&&id| is_sphere(id)).count() as u32;
-            let ntri = c as u32 - nsph;
-            out.nodes[me].start = s as u32;
-            out.nodes[me].ntri = ntri;
-            out.nodes[me].nsph = nsph;
-            if ntri > 0 && nsph > 0 {
-                let part = |ids: &[u32]| {
-                    let b = ids.iter().fold(Aabb::EMPTY, |b, &id| b.union(&shape_bounds(shape(id))));
-                    pad_outward(&b)
-                };
-                let tri_b = part(&out.ids[s..s + ntri as usize]);
-                let sph_b = part(&out.ids[s + ntri as usize..s + c]);
-                let l = out.nodes.len() as u32;
-                out.nodes.push(CNode {
-                    bounds: tri_b,
-                    left: u32::MAX,
-                    right: u32::MAX,
-                    start: s as u32,
-                    ntri,
-                    nsph: 0,
-                });
-                out.nodes.push(CNode {
-                    bounds: sph_b,
-                    left: u32::MAX,
-                    right: u32::MAX,
-                    start: s as u32 + ntri,
-                    ntri: 0,
-                    nsph,
-                });
-                out.nodes[me].left = l;
-                out.nodes[me].right = l + 1;
+    let (l, r) = p.children(n);
+    let ((cl, tl, sl), (cr, tr, sr)) = if depth < PARALLEL_PLAN_DEPTH {
+        rayon::join(|| plan_rec(p, opts, block_m, l, depth + 1), || plan_rec(p, opts, block_m, r, depth + 1))
+    } else {
+        (plan_rec(p, opts, block_m, l, depth + 1), plan_rec(p, opts, block_m, r, depth + 1))
+    };
+    let (ntri, nsph) = (tl + tr, sl + sr);
+    let single_kind = ntri == 0 || nsph == 0;
+    let leaf = if single_kind && (ntri + nsph) as usize <= opts.max_leaf_prims {
+        leaf_cost(ntri, nsph)
+    } else {
+        f32::INFINITY
+    };
+    // dist[j]: cheapest split of j + 1 slots between the children (each gets >= 1).
+    let mut dist = [f32::INFINITY; 8];
+    let mut dist_k = [0usize; 8];
+    for j in 1..8 {
+        for k in 1..=j {
+            let c = cl[k - 1] + cr[j - k];
+            if c < dist[j] {
+                dist[j] = c;
+                dist_k[j] = k;
             }
-        } else {
-            let l = out.nodes.len() as u32;
-            rec(bvh2, node.start as usize, out, is_sphere, shape);
-            let r = out.nodes.len() as u32;
-            rec(bvh2, node.start as usize + 1, out, is_sphere, shape);
-            let (a, b) = (out.nodes[l as usize], out.nodes[r as usize]);
-            let n = &mut out.nodes[me];
-            n.left = l;
-            n.right = r;
-            n.start = a.start.min(b.start);
-            n.ntri = a.ntri + b.ntri;
-            n.nsph = a.nsph + b.nsph;
         }
     }
-    rec(bvh2, 0, &mut out, &is_sphere, shape);
-    out
+    let as_node = area * opts.node_cost + dist[7];
+    let mut cost = [0.0f32; 8];
+    let mut forest = [(0usize, 1usize); 8];
+    cost[0] = leaf.min(as_node);
+    for j in 1..8 {
+        if dist[j] < cost[j - 1] {
+            cost[j] = dist[j];
+            forest[j] = (dist_k[j], j + 1);
+        } else {
+            cost[j] = cost[j - 1];
+            forest[j] = forest[j - 1];
+        }
+    }
+    p.plans[n].store(Plan::new(leaf <= as_node, dist_k[7], &forest).0, Relaxed);
+    p.counts[n].store(ntri + nsph, Relaxed);
+    (cost, ntri, nsph)
+}
+
+/// Up to eight binary nodes: the children of one BVH8 node.
+#[derive(Default)]
+struct Kids {
+    n: [usize; 8],
+    len: usize,
+}
+
+impl Kids {
+    fn push(&mut self, c: usize) {
+        self.n[self.len] = c;
+        self.len += 1;
+    }
+    fn as_slice(&self) -> &[usize] {
+        &self.n[..self.len]
+    }
+}
+
+/// Appends the roots of the best forest of at most `slots` roots for `n`'s subtree.
+fn forest(p: &Planned, n: usize, slots: usize, out: &mut Kids) {
+    let (k, used) = p.plan(n).forest(slots);
+    if k == 0 {
+        out.push(n);
+    } else {
+        let (l, r) = p.children(n);
+        forest(p, l, k, out);
+        forest(p, r, used - k, out);
+    }
+}
+
+/// Greedy children: open the largest-area inner descendant until 8 slots are used.
+fn greedy_forest(p: &Planned, n: usize, out: &mut Kids) {
+    let (l, r) = p.children(n);
+    out.push(l);
+    out.push(r);
+    let nodes = &p.bvh2.nodes;
+    while out.len < 8 {
+        let best = out
+            .as_slice()
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| !nodes[**c].is_leaf())
+            .max_by(|a, b| nodes[*a.1].bounds.half_area().total_cmp(&nodes[*b.1].bounds.half_area()));
+        let Some((pos, &c)) = best else { break };
+        let (cl, cr) = p.children(c);
+        out.n[pos] = cl;
+        out.push(cr);
+    }
+}
+
+/// Where an [`Emitter`] writes: the growing arrays of the whole BVH8 (the top of the tree),
+/// or the disjoint ranges of them reserved for one deferred subtree.
+trait Sink<T> {
+    /// Reserves `k` consecutive nodes; returns the global index of the first.
+    fn alloc_nodes(&mut self, k: usize) -> usize;
+    /// Stores node `i` (global index, reserved before).
+    fn set_node(&mut self, i: usize, node: Bvh8Node);
+    /// Appends a triangle block; returns its global index.
+    fn push_tri(&mut self, b: T) -> usize;
+    /// Appends a sphere block; returns its global index.
+    fn push_sphere(&mut self, b: Sphere4) -> usize;
+}
+
+impl<T> Sink<T> for Bvh8<T> {
+    fn alloc_nodes(&mut self, k: usize) -> usize {
+        let i = self.nodes.len();
+        self.nodes.resize(i + k, Bvh8Node::EMPTY);
+        i
+    }
+    fn set_node(&mut self, i: usize, node: Bvh8Node) {
+        self.nodes[i] = node;
+    }
+    fn push_tri(&mut self, b: T) -> usize {
+        self.tris.push(b);
+        self.tris.len() - 1
+    }
+    fn push_sphere(&mut self, b: Sphere4) -> usize {
+        self.spheres.push(b);
+        self.spheres.len() - 1
+    }
+}
+
+/// The ranges of the final arrays reserved for one deferred subtree, sized by
+/// [`Emitter::count`]: `nodes[0]` is global node `bases.0`, and so on.
+struct Part<'o, T> {
+    nodes: &'o mut [Bvh8Node],
+    tris: &'o mut [T],
+    spheres: &'o mut [Sphere4],
+    bases: (usize, usize, usize),
+    used: (usize, usize, usize),
+}
+
+impl<T> Sink<T> for Part<'_, T> {
+    fn alloc_nodes(&mut self, k: usize) -> usize {
+        self.used.0 += k;
+        self.bases.0 + self.used.0 - k
+    }
+    fn set_node(&mut self, i: usize, node: Bvh8Node) {
+        self.nodes[i - self.bases.0] = node;
+    }
+    fn push_tri(&mut self, b: T) -> usize {
+        self.tris[self.used.1] = b;
+        self.used.1 += 1;
+        self.bases.1 + self.used.1 - 1
+    }
+    fn push_sphere(&mut self, b: Sphere4) -> usize {
+        self.spheres[self.used.2] = b;
+        self.used.2 += 1;
+        self.bases.2 + self.used.2 - 1
+    }
+}
+
+/// Writes the 8-wide BVH (or one deferred part of it) from the planned binary tree.
+struct Emitter<'a, S> {
+    p: &'a Planned<'a>,
+    method: CollapseMethod,
+    shape: &'a S,
+    test: TriangleTest,
+    /// With `Some`, inner children with at most `cut` primitives are not written but listed
+    /// as `(node index, binary node)` for parallel tasks.
+    defer: Option<(u32, Vec<(usize, usize)>)>,
+}
+
+impl<'a, S: Fn(u32) -> PrimShape + Sync> Emitter<'a, S> {
+    /// An emitter that writes everything it visits (for one deferred part).
+    fn clone_plain(&self) -> Self {
+        Emitter { p: self.p, method: self.method, shape: self.shape, test: self.test, defer: None }
+    }
+
+    fn is_leaf_root(&self, c: usize) -> bool {
+        match self.method {
+            CollapseMethod::Optimal => self.p.plan(c).as_leaf(),
+            CollapseMethod::Greedy => self.p.bvh2.nodes[c].is_leaf(),
+        }
+    }
+
+    fn children_of(&self, n: usize) -> Kids {
+        let mut kids = Kids::default();
+        match self.method {
+            CollapseMethod::Optimal => {
+                let k = self.p.plan(n).node_split();
+                let (l, r) = self.p.children(n);
+                forest(self.p, l, k, &mut kids);
+                forest(self.p, r, 8 - k, &mut kids);
+            }
+            CollapseMethod::Greedy => greedy_forest(self.p, n, &mut kids),
+        }
+        kids
+    }
+
+    /// Writes the leaf blocks of leaf root `c`.
+    fn leaf<T: TriBlock>(&self, c: usize, out: &mut impl Sink<T>) -> NodeRef {
+        let start = self.p.first_prim(c);
+        let ids = &self.p.bvh2.prim_ids[start..start + self.p.count(c) as usize];
+        let (kind, m) =
+            if ids[0] < self.p.first_sphere { (LeafKind::Triangles, T::M) } else { (LeafKind::Spheres, Sphere4::M) };
+        let mut first = 0;
+        for (k, chunk) in ids.chunks(m).enumerate() {
+            let at = if kind == LeafKind::Triangles {
+                let mut b = T::EMPTY;
+                for (lane, &id) in chunk.iter().enumerate() {
+                    let PrimShape::Triangle([v0, v1, v2]) = (self.shape)(id) else { unreachable!("triangle leaf") };
+                    b.set_for(self.test, lane, v0, v1, v2, id);
+                }
+                out.push_tri(b)
+            } else {
+                let mut b = Sphere4::EMPTY;
+                for (lane, &id) in chunk.iter().enumerate() {
+                    let PrimShape::Sphere(center, r) = (self.shape)(id) else { unreachable!("sphere leaf") };
+                    b.set(lane, center, r, id);
+                }
+                out.push_sphere(b)
+            };
+            if k == 0 {
+                first = at;
+            }
+        }
+        NodeRef::leaf(kind, first as u32, ids.len().div_ceil(m), (ids.len() - 1) % m + 1)
+    }
+
+    /// Builds the node for inner root `n`, writing its inner children (allocated
+    /// consecutively, siblings adjacent) and everything below them — or deferring them.
+    fn fill<T: TriBlock>(&mut self, n: usize, out: &mut impl Sink<T>) -> Bvh8Node {
+        let kids = self.children_of(n);
+        let inner = kids.as_slice().iter().filter(|&&c| !self.is_leaf_root(c)).count();
+        let mut next = out.alloc_nodes(inner);
+        let mut node = Bvh8Node::EMPTY;
+        let mut todo = Kids::default();
+        for (slot, &c) in kids.as_slice().iter().enumerate() {
+            let r = if self.is_leaf_root(c) {
+                self.leaf(c, out)
+            } else {
+                todo.push(c);
+                next += 1;
+                NodeRef::inner((next - 1) as u32)
+            };
+            node.set_child(slot, &self.p.bvh2.nodes[c].bounds, r);
+        }
+        let mut next = next - inner;
+        for &c in todo.as_slice() {
+            match &mut self.defer {
+                Some((cut, list)) if self.p.count(c) <= *cut => list.push((next, c)),
+                _ => {
+                    let child = self.fill(c, out);
+                    out.set_node(next, child);
+                }
+            }
+            next += 1;
+        }
+        node
+    }
+
+    /// `(nodes, triangle blocks, sphere blocks)` that [`Emitter::fill`] writes below inner
+    /// root `n` (without deferring; its own node not included).
+    fn count(&self, n: usize, block_m: usize) -> (usize, usize, usize) {
+        let mut total = (0, 0, 0);
+        for &c in self.children_of(n).as_slice() {
+            if self.is_leaf_root(c) {
+                let count = self.p.count(c) as usize;
+                let first = self.p.bvh2.prim_ids[self.p.first_prim(c)];
+                if first < self.p.first_sphere {
+                    total.1 += count.div_ceil(block_m);
+                } else {
+                    total.2 += count.div_ceil(Sphere4::M);
+                }
+            } else {
+                let (a, b, s) = self.count(c, block_m);
+                total = (total.0 + 1 + a, total.1 + b, total.2 + s);
+            }
+        }
+        total
+    }
+}
+
+/// Splits every binary leaf that mixes triangles (`id < first_sphere`) and spheres into an
+/// inner node over one leaf per kind; borrows `bvh2` when no leaf mixes them (as
+/// [`crate::bvh::build_bvh2_kinds`] guarantees).
+fn pure_leaves<'a>(bvh2: &'a Bvh2, first_sphere: u32, shape: &dyn Fn(u32) -> PrimShape) -> Cow<'a, Bvh2> {
+    let mixed = |n: &Bvh2Node| {
+        let ids = || bvh2.prim_ids[n.start as usize..(n.start + n.count) as usize].iter();
+        n.is_leaf() && ids().any(|&id| id < first_sphere) && ids().any(|&id| id >= first_sphere)
+    };
+    if bvh2.is_empty() || !bvh2.nodes.iter().any(mixed) {
+        return Cow::Borrowed(bvh2);
+    }
+    let mut out = Bvh2 { nodes: vec![bvh2.nodes[0]], prim_ids: bvh2.prim_ids.clone() };
+    // (source node, output node), depth first with siblings adjacent as in the builder.
+    let mut stack = vec![(0usize, 0usize)];
+    while let Some((s, o)) = stack.pop() {
+        let node = bvh2.nodes[s];
+        if node.is_leaf() && !mixed(&node) {
+            out.nodes[o] = node;
+        } else if node.is_leaf() {
+            let (a, c) = (node.start as usize, node.count as usize);
+            let ids = &mut out.prim_ids[a..a + c];
+            ids.sort_by_key(|&id| id >= first_sphere);
+            let nt = ids.iter().filter(|&&id| id < first_sphere).count();
+            let part =
+                |ids: &[u32]| pad_outward(&ids.iter().fold(Aabb::EMPTY, |b, &id| b.union(&shape_bounds(shape(id)))));
+            let k = out.nodes.len() as u32;
+            out.nodes[o] = Bvh2Node { bounds: node.bounds, start: k, count: 0 };
+            out.nodes.push(Bvh2Node { bounds: part(&out.prim_ids[a..a + nt]), start: a as u32, count: nt as u32 });
+            out.nodes.push(Bvh2Node {
+                bounds: part(&out.prim_ids[a + nt..a + c]),
+                start: (a + nt) as u32,
+                count: (c - nt) as u32,
+            });
+        } else {
+            let k = out.nodes.len();
+            out.nodes[o] = Bvh2Node { start: k as u32, ..node };
+            out.nodes.extend([Bvh2Node { bounds: Aabb::EMPTY, start: 0, count: 0 }; 2]);
+            stack.push((node.start as usize + 1, k + 1));
+            stack.push((node.start as usize, k));
+        }
+    }
+    Cow::Owned(out)
 }
 
 fn shape_bounds(s: PrimShape) -> Aabb {
@@ -187,218 +507,92 @@ fn shape_bounds(s: PrimShape) -> Aabb {
     }
 }
 
-/// The dynamic program's decisions for one binary node.
-#[derive(Clone, Copy, Debug, Default)]
-struct Plan {
-    /// As a single forest root: a leaf (`true`) or an 8-wide node.
-    as_leaf: bool,
-    /// As an 8-wide node: slots given to the left child's forest (the right gets the rest).
-    node_split: u8,
-    /// Best forest of at most `i + 1` roots: `(slots to the left child, slots used)`;
-    /// `(0, 1)` keeps the node as a single root.
-    forest: [(u8, u8); 8],
-}
-
-fn plan(tree: &Binary, opts: &CollapseOptions, block_m: usize) -> Vec<Plan> {
-    let n = tree.nodes.len();
-    // cost[n][i] = C(n, i + 1): cheapest forest of at most i + 1 roots for n's subtree.
-    let mut cost = vec![[f32::INFINITY; 8]; n];
-    let mut plans = vec![Plan::default(); n];
-    let blocks = |c: &CNode| c.ntri.div_ceil(block_m as u32) + c.nsph.div_ceil(Sphere4::M as u32);
-    for i in (0..n).rev() {
-        let node = tree.nodes[i];
-        let area = node.bounds.half_area();
-        let single_kind = node.ntri == 0 || node.nsph == 0;
-        let leaf_ok = single_kind && (node.is_leaf() || node.count() as usize <= opts.max_leaf_prims);
-        let leaf_cost = if leaf_ok {
-            area * (opts.block_cost * blocks(&node) as f32 + opts.prim_cost * node.count() as f32)
-        } else {
-            f32::INFINITY
-        };
-        if node.is_leaf() {
-            cost[i] = [leaf_cost; 8];
-            plans[i] = Plan { as_leaf: true, node_split: 0, forest: [(0, 1); 8] };
-            continue;
-        }
-        let (l, r) = (node.left as usize, node.right as usize);
-        // dist[j]: cheapest split of j + 1 slots between the children (each gets >= 1).
-        let mut dist = [f32::INFINITY; 8];
-        let mut dist_k = [0u8; 8];
-        for j in 1..8 {
-            for k in 1..=j {
-                let c = cost[l][k - 1] + cost[r][j - k];
-                if c < dist[j] {
-                    dist[j] = c;
-                    dist_k[j] = k as u8;
-                }
-            }
-        }
-        let node_cost = area * opts.node_cost + dist[7];
-        let p = &mut plans[i];
-        p.as_leaf = leaf_cost <= node_cost;
-        p.node_split = dist_k[7];
-        cost[i][0] = leaf_cost.min(node_cost);
-        p.forest[0] = (0, 1);
-        for j in 1..8 {
-            if dist[j] < cost[i][j - 1] {
-                cost[i][j] = dist[j];
-                p.forest[j] = (dist_k[j], j as u8 + 1);
-            } else {
-                cost[i][j] = cost[i][j - 1];
-                p.forest[j] = p.forest[j - 1];
-            }
-        }
-    }
-    plans
-}
-
-/// Appends the roots of the best forest of at most `slots` roots for `n`'s subtree.
-fn forest(tree: &Binary, plans: &[Plan], n: usize, slots: usize, out: &mut Vec<usize>) {
-    let (k, used) = plans[n].forest[slots - 1];
-    if k == 0 {
-        out.push(n);
-    } else {
-        let node = tree.nodes[n];
-        forest(tree, plans, node.left as usize, k as usize, out);
-        forest(tree, plans, node.right as usize, used as usize - k as usize, out);
-    }
-}
-
-/// Greedy plan: every inner node is a BVH8 node, every binary leaf a BVH8 leaf; a node's
-/// children come from opening the largest-area inner descendant until 8 slots are used.
-fn greedy_forest(tree: &Binary, n: usize, out: &mut Vec<usize>) {
-    let node = tree.nodes[n];
-    out.clear();
-    out.extend([node.left as usize, node.right as usize]);
-    while out.len() < 8 {
-        let best = out
-            .iter()
-            .enumerate()
-            .filter(|(_, c)| !tree.nodes[**c].is_leaf())
-            .max_by(|a, b| tree.nodes[*a.1].bounds.half_area().total_cmp(&tree.nodes[*b.1].bounds.half_area()));
-        let Some((pos, &c)) = best else { break };
-        let cn = tree.nodes[c];
-        out[pos] = cn.left as usize;
-        out.push(cn.right as usize);
-    }
-}
-
-struct Emitter<'a, T, S> {
-    tree: &'a Binary,
-    plans: &'a [Plan],
-    method: CollapseMethod,
-    shape: &'a S,
-    out: Bvh8<T>,
-}
-
-impl<T: TriBlock, S: Fn(u32) -> PrimShape> Emitter<'_, T, S> {
-    fn is_leaf_root(&self, c: usize) -> bool {
-        match self.method {
-            CollapseMethod::Optimal => self.plans[c].as_leaf,
-            CollapseMethod::Greedy => self.tree.nodes[c].is_leaf(),
-        }
-    }
-
-    fn children_of(&self, n: usize) -> Vec<usize> {
-        let mut v = Vec::with_capacity(8);
-        match self.method {
-            CollapseMethod::Optimal => {
-                let node = self.tree.nodes[n];
-                let k = self.plans[n].node_split as usize;
-                forest(self.tree, self.plans, node.left as usize, k, &mut v);
-                forest(self.tree, self.plans, node.right as usize, 8 - k, &mut v);
-            }
-            CollapseMethod::Greedy => greedy_forest(self.tree, n, &mut v),
-        }
-        v
-    }
-
-    fn leaf(&mut self, c: usize) -> NodeRef {
-        let node = self.tree.nodes[c];
-        let ids = &self.tree.ids[node.start as usize..(node.start + node.count()) as usize];
-        if node.nsph == 0 {
-            let first = self.out.tris.len();
-            for chunk in ids.chunks(T::M) {
-                let mut b = T::EMPTY;
-                for (lane, &id) in chunk.iter().enumerate() {
-                    let PrimShape::Triangle([a, bb, cc]) = (self.shape)(id) else { unreachable!("triangle leaf") };
-                    b.set_for(self.out.test, lane, a, bb, cc, id);
-                }
-                self.out.tris.push(b);
-            }
-            NodeRef::leaf(LeafKind::Triangles, first as u32, self.out.tris.len() - first, (ids.len() - 1) % T::M + 1)
-        } else {
-            let first = self.out.spheres.len();
-            for chunk in ids.chunks(Sphere4::M) {
-                let mut b = Sphere4::EMPTY;
-                for (lane, &id) in chunk.iter().enumerate() {
-                    let PrimShape::Sphere(center, r) = (self.shape)(id) else { unreachable!("sphere leaf") };
-                    b.set(lane, center, r, id);
-                }
-                self.out.spheres.push(b);
-            }
-            NodeRef::leaf(
-                LeafKind::Spheres,
-                first as u32,
-                self.out.spheres.len() - first,
-                (ids.len() - 1) % Sphere4::M + 1,
-            )
-        }
-    }
-
-    /// Fills node `index` from binary node `n`, allocating the inner children's nodes
-    /// consecutively (siblings adjacent) before descending into them.
-    fn fill(&mut self, index: usize, n: usize) {
-        let kids = self.children_of(n);
-        debug_assert!(kids.len() <= 8);
-        let first_inner = self.out.nodes.len();
-        let inner_count = kids.iter().filter(|&&c| !self.is_leaf_root(c)).count();
-        self.out.nodes.resize(first_inner + inner_count, Bvh8Node::EMPTY);
-        let mut next = first_inner;
-        let mut todo = Vec::with_capacity(inner_count);
-        for (slot, &c) in kids.iter().enumerate() {
-            let r = if self.is_leaf_root(c) {
-                self.leaf(c)
-            } else {
-                todo.push((next, c));
-                next += 1;
-                NodeRef::inner((next - 1) as u32)
-            };
-            let b = self.tree.nodes[c].bounds;
-            self.out.nodes[index].set_child(slot, &b, r);
-        }
-        for (i, c) in todo {
-            self.fill(i, c);
-        }
-    }
-}
-
 /// Collapses `bvh2` into an 8-wide BVH with leaf blocks of `T` laid out for
-/// Möller–Trumbore. `shape(id)` gives the geometry of primitive `id`.
-pub fn collapse<T: TriBlock>(bvh2: &Bvh2, shape: impl Fn(u32) -> PrimShape + Sync, opts: &CollapseOptions) -> Bvh8<T> {
-    collapse_for(bvh2, shape, opts, TriangleTest::MollerTrumbore)
+/// Möller–Trumbore. `shape(id)` gives the geometry of primitive `id`; ids below
+/// `first_sphere` are triangles, the others spheres.
+pub fn collapse<T: TriBlock>(
+    bvh2: &Bvh2,
+    shape: impl Fn(u32) -> PrimShape + Sync,
+    first_sphere: u32,
+    opts: &CollapseOptions,
+) -> Bvh8<T> {
+    collapse_for(bvh2, shape, first_sphere, opts, TriangleTest::MollerTrumbore)
 }
 
 /// [`collapse()`] with leaf blocks laid out for triangle test `test`.
+///
+/// The dynamic program runs bottom-up with the two children of each node in parallel near
+/// the root. The emission writes the top of the tree on one thread and defers the subtrees
+/// of at most 1/64 of the primitives; their sizes are counted, ranges of the final arrays
+/// reserved for each in order, and parallel tasks fill them — so the result is the same
+/// whatever the thread count, and nothing is copied twice.
 pub fn collapse_for<T: TriBlock>(
     bvh2: &Bvh2,
     shape: impl Fn(u32) -> PrimShape + Sync,
+    first_sphere: u32,
     opts: &CollapseOptions,
     test: TriangleTest,
 ) -> Bvh8<T> {
-    let tree = binary_tree(bvh2, &shape);
-    let out = Bvh8 { nodes: vec![Bvh8Node::EMPTY], tris: Vec::new(), spheres: Vec::new(), test };
-    if tree.nodes.is_empty() {
+    use rayon::prelude::*;
+    let bvh2 = pure_leaves(bvh2, first_sphere, &shape);
+    let m = bvh2.nodes.len();
+    let p = Planned {
+        bvh2: &bvh2,
+        first_sphere,
+        plans: (0..m).map(|_| AtomicU64::new(0)).collect(),
+        counts: (0..m).map(|_| AtomicU32::new(0)).collect(),
+    };
+    let mut out = Bvh8 { nodes: vec![Bvh8Node::EMPTY], tris: Vec::new(), spheres: Vec::new(), test };
+    if bvh2.is_empty() {
         return out;
     }
-    let plans = if opts.method == CollapseMethod::Optimal { plan(&tree, opts, T::M) } else { Vec::new() };
-    let mut em = Emitter { tree: &tree, plans: &plans, method: opts.method, shape: &shape, out };
-    if tree.nodes[0].is_leaf() || em.is_leaf_root(0) {
-        let r = em.leaf(0);
-        let b = tree.nodes[0].bounds;
-        em.out.nodes[0].set_child(0, &b, r);
-    } else {
-        em.fill(0, 0);
+    plan_rec(&p, opts, T::M as u32, 0, 0);
+    let cut = (p.count(0) / PARALLEL_EMIT_DIVISOR).max(1);
+    let mut em = Emitter { p: &p, method: opts.method, shape: &shape, test, defer: Some((cut, Vec::new())) };
+    if bvh2.nodes[0].is_leaf() || em.is_leaf_root(0) {
+        let r = em.leaf(0, &mut out);
+        out.nodes[0].set_child(0, &bvh2.nodes[0].bounds, r);
+        return out;
     }
-    em.out
+    out.nodes[0] = em.fill(0, &mut out);
+    let deferred = em.defer.take().map(|d| d.1).unwrap_or_default();
+    // Reserve each deferred subtree's ranges, in order, after the top of the tree.
+    let sizes: Vec<_> = deferred.par_iter().map(|&(_, n)| em.count(n, T::M)).collect();
+    let mut bases = Vec::with_capacity(sizes.len());
+    let mut end = (out.nodes.len(), out.tris.len(), out.spheres.len());
+    for s in &sizes {
+        bases.push(end);
+        end = (end.0 + s.0, end.1 + s.1, end.2 + s.2);
+    }
+    let top = bases.first().copied().unwrap_or(end);
+    out.nodes.resize(end.0, Bvh8Node::EMPTY);
+    out.tris.resize(end.1, T::EMPTY);
+    out.spheres.resize(end.2, Sphere4::EMPTY);
+    let (mut nodes, mut tris, mut spheres) =
+        (&mut out.nodes[top.0..], &mut out.tris[top.1..], &mut out.spheres[top.2..]);
+    let mut parts = Vec::with_capacity(sizes.len());
+    for (s, &bases) in sizes.iter().zip(&bases) {
+        let (a, rest) = std::mem::take(&mut nodes).split_at_mut(s.0);
+        let (b, rest_t) = std::mem::take(&mut tris).split_at_mut(s.1);
+        let (c, rest_s) = std::mem::take(&mut spheres).split_at_mut(s.2);
+        (nodes, tris, spheres) = (rest, rest_t, rest_s);
+        parts.push(Part { nodes: a, tris: b, spheres: c, bases, used: (0, 0, 0) });
+    }
+    let em = Emitter { defer: None, ..em };
+    let roots: Vec<Bvh8Node> = parts
+        .into_par_iter()
+        .zip(&deferred)
+        .map(|(mut part, &(_, n))| {
+            let root = em.clone_plain().fill(n, &mut part);
+            debug_assert_eq!(
+                (part.used.0, part.used.1, part.used.2),
+                (part.nodes.len(), part.tris.len(), part.spheres.len())
+            );
+            root
+        })
+        .collect();
+    for (root, &(at, _)) in roots.into_iter().zip(&deferred) {
+        out.nodes[at] = root;
+    }
+    out
 }

@@ -18,7 +18,7 @@ pub mod traverse1;
 pub mod traverse_packet;
 pub mod validate;
 
-pub use build_sah::{BuildOptions, BuildPrim, BuildQuality, SplitMethod, build_bvh2};
+pub use build_sah::{BuildOptions, BuildPrim, BuildQuality, SplitMethod, build_bvh2, build_bvh2_kinds};
 pub use bvh2::{Bvh2, Bvh2Node};
 pub use bvh8::{Bvh8, Bvh8Stats, DefaultTriBlock};
 pub use collapse::{CollapseMethod, CollapseOptions, PrimShape, collapse, collapse_for};

@@ -6,7 +6,7 @@
 //! collinear triangles, non-positive radii) and counts them in the [`CommitReport`], as Embree does.
 //! An empty scene is legal: every ray misses.
 
-use crate::bvh::{BuildOptions, BuildPrim, Bvh2, Bvh8, build_bvh2, collapse_for};
+use crate::bvh::{BuildOptions, BuildPrim, Bvh2, Bvh8, build_bvh2_kinds, collapse_for};
 use crate::geometry::TriangleTest;
 use crate::math::{Aabb, Vec3};
 use crate::scene::{Camera, Light, Material, MaterialId, Scene, SpheresSoa, TrianglesSoa};
@@ -293,16 +293,20 @@ impl Filtered {
     pub(crate) fn build(self, opts: &BuildOptions) -> Scene {
         let Filtered { triangles, spheres, materials, lights, camera } = self;
         let nt = triangles.len();
-        let mut prims: Vec<BuildPrim> = (0..nt)
-            .map(|i| BuildPrim { bounds: triangles.bounds(i), id: i as u32 })
-            .chain((0..spheres.len()).map(|i| BuildPrim { bounds: spheres.bounds(i), id: (nt + i) as u32 }))
-            .collect();
-        let bounds = prims.iter().fold(Aabb::EMPTY, |b, p| b.union(&p.bounds));
-        let bvh2 = build_bvh2(&mut prims, opts);
+        let mut prims: Vec<BuildPrim> = {
+            use rayon::prelude::*;
+            (0..nt)
+                .into_par_iter()
+                .map(|i| BuildPrim::new(triangles.bounds(i), i as u32))
+                .chain((0..spheres.len()).into_par_iter().map(|i| BuildPrim::new(spheres.bounds(i), (nt + i) as u32)))
+                .collect()
+        };
+        let bounds = prims.iter().fold(Aabb::EMPTY, |b, p| b.union(&p.bounds()));
+        let bvh2 = build_bvh2_kinds(&mut prims, opts, nt as u32);
         drop(prims);
         let mut scene = Scene { triangles, spheres, materials, lights, camera, bounds, bvh2, bvh8: Bvh8::default() };
         let test = TriangleTest::from_watertight(opts.watertight);
-        scene.bvh8 = collapse_for(&scene.bvh2, |id| scene.prim_shape(id), &opts.collapse, test);
+        scene.bvh8 = collapse_for(&scene.bvh2, |id| scene.prim_shape(id), nt as u32, &opts.collapse, test);
         scene
     }
 
