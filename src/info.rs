@@ -19,6 +19,8 @@ pub struct InfoOptions {
     pub cache_dir: Option<PathBuf>,
     /// Check the structural invariants of both BVHs after each build.
     pub validate: bool,
+    /// Keep the binary BVH after the collapse ([`BuildOptions::keep_bvh2`]) and report it.
+    pub keep_bvh2: bool,
     /// Also build Embree's BVH (MEDIUM and HIGH) over the same triangles, on as many threads
     /// as the caller's rayon pool has (needs the `embree` feature).
     pub against_embree: bool,
@@ -30,6 +32,7 @@ impl Default for InfoOptions {
             qualities: vec![BuildQuality::Fast, BuildQuality::Medium, BuildQuality::High],
             cache_dir: None,
             validate: false,
+            keep_bvh2: false,
             against_embree: false,
         }
     }
@@ -47,8 +50,8 @@ pub struct BuildInfo {
     /// Cache problems (rejected file, failed write), one line each; `raypack info` prints
     /// them on stderr.
     pub cache_warnings: Vec<String>,
-    /// Statistics of the binary BVH.
-    pub bvh2: BvhStats,
+    /// Statistics of the binary BVH, when the build kept it (`--keep-bvh2`).
+    pub bvh2: Option<BvhStats>,
     /// Statistics of the 8-wide BVH the kernels traverse (with its bytes).
     pub bvh8: Bvh8Stats,
     /// Bytes of the binary BVH (nodes and primitive ids).
@@ -197,7 +200,7 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, InfoErro
     for (i, &quality) in opts.qualities.iter().enumerate() {
         let last = i + 1 == opts.qualities.len();
         let b: SceneBuilder = if last { builder.take().expect("builder") } else { builder.clone().expect("builder") };
-        let build_opts = BuildOptions { quality, ..BuildOptions::default() };
+        let build_opts = BuildOptions { quality, keep_bvh2: opts.keep_bvh2, ..BuildOptions::default() };
         let peak = BuildPeak::start();
         let t = Instant::now();
         let (scene, report, cache) = match &opts.cache_dir {
@@ -220,7 +223,9 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, InfoErro
         info.store_bytes = store_bytes(&scene);
         let valid = opts.validate.then(|| {
             let bounds: Vec<_> = (0..scene.num_prims() as u32).map(|p| scene.prim_bounds(p)).collect();
-            crate::bvh::validate::validate_bvh2(scene.bvh2(), &bounds)
+            scene
+                .bvh2()
+                .map_or(Ok(()), |b| crate::bvh::validate::validate_bvh2(b, &bounds))
                 .map_err(|e| format!("binary BVH: {e}"))
                 .and_then(|()| crate::bvh::validate::validate_bvh8(scene.bvh8(), &bounds))
                 .map_err(|e| format!("8-wide BVH: {e}"))
@@ -232,7 +237,7 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, InfoErro
             cache_warnings: cache.map(|c| c.warnings()).unwrap_or_default(),
             bvh2: scene.bvh_stats(),
             bvh8: scene.bvh8().stats(),
-            bvh2_bytes: bvh2_bytes(scene.bvh2()),
+            bvh2_bytes: scene.bvh2().map_or(0, bvh2_bytes),
             valid,
             peak_added_bytes,
         });
@@ -311,16 +316,26 @@ impl SceneInfo {
         for bi in &self.builds {
             let how = if bi.from_cache { "loaded from the BVH cache" } else { "built" };
             let _ = writeln!(s, "{:<12} {:.4} s, {how}", format!("build {}", quality_name(bi.quality)), bi.seconds);
-            let _ = writeln!(s, "  bvh2       {}", bi.bvh2);
+            match &bi.bvh2 {
+                Some(b) => {
+                    let _ = writeln!(s, "  bvh2       {b}");
+                }
+                None => {
+                    let _ = writeln!(s, "  bvh2       freed after the collapse (--keep-bvh2 keeps it)");
+                }
+            }
             let _ = writeln!(s, "  bvh8       {}", bi.bvh8);
-            let _ = writeln!(
+            let _ = write!(
                 s,
-                "  memory     bvh8 {} ({:.1} bytes/triangle) + bvh2 {} ({:.1} bytes/triangle), both resident",
+                "  memory     bvh8 {} ({:.1} bytes/triangle)",
                 mb(bi.bvh8.bytes),
-                self.per_triangle(bi.bvh8.bytes),
-                mb(bi.bvh2_bytes),
-                self.per_triangle(bi.bvh2_bytes)
+                self.per_triangle(bi.bvh8.bytes)
             );
+            let _ = if bi.bvh2.is_some() {
+                writeln!(s, " + bvh2 {} ({:.1} bytes/triangle)", mb(bi.bvh2_bytes), self.per_triangle(bi.bvh2_bytes))
+            } else {
+                writeln!(s)
+            };
             if let Some(p) = bi.peak_added_bytes {
                 let _ = writeln!(s, "  peak       +{} resident during the commit", mb(p as usize));
             }
@@ -362,15 +377,15 @@ impl SceneInfo {
                     "seconds": bi.seconds,
                     "from_cache": bi.from_cache,
                     "cache_warnings": bi.cache_warnings,
-                    "bvh2": {
-                        "sah_cost": bi.bvh2.sah_cost,
-                        "inner_nodes": bi.bvh2.inner_nodes,
-                        "leaves": bi.bvh2.leaves,
-                        "mean_leaf_size": bi.bvh2.mean_leaf_size,
-                        "depth": bi.bvh2.depth,
+                    "bvh2": bi.bvh2.as_ref().map(|b2| json!({
+                        "sah_cost": b2.sah_cost,
+                        "inner_nodes": b2.inner_nodes,
+                        "leaves": b2.leaves,
+                        "mean_leaf_size": b2.mean_leaf_size,
+                        "depth": b2.depth,
                         "bytes": bi.bvh2_bytes,
                         "bytes_per_triangle": self.per_triangle(bi.bvh2_bytes),
-                    },
+                    })),
                     "bvh8": {
                         "sah_cost": bi.bvh8.sah_cost,
                         "nodes": bi.bvh8.nodes,

@@ -183,6 +183,9 @@ struct InfoArgs {
     /// Print the figures as JSON.
     #[arg(long)]
     json: bool,
+    /// Keep the binary BVH after the collapse and report it (the kernels do not need it).
+    #[arg(long)]
+    keep_bvh2: bool,
     /// Also time Embree's MEDIUM and HIGH builds of the same triangles on as many threads.
     #[arg(long, value_enum)]
     against: Option<AgainstArg>,
@@ -407,6 +410,7 @@ fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
     let mut opts = InfoOptions {
         cache_dir: a.bvh_cache.clone(),
         validate: a.validate,
+        keep_bvh2: a.keep_bvh2,
         against_embree: a.against.is_some(),
         ..InfoOptions::default()
     };
@@ -451,7 +455,8 @@ fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     print_warnings(&warnings);
     let quality: BuildQuality = a.quality.into();
     let t = Instant::now();
-    let opts = BuildOptions { quality, watertight: a.watertight, ..BuildOptions::default() };
+    // The binary BVH stays for the reference rows and the checksums they anchor.
+    let opts = BuildOptions { quality, watertight: a.watertight, keep_bvh2: true, ..BuildOptions::default() };
     let (scene, report) = match a.bvh_cache.as_deref() {
         None => builder.commit(&opts),
         Some(dir) => {

@@ -170,7 +170,7 @@ fn watertight_kernels_match_the_scalar_reference() {
     // Every kernel with the watertight test against the scalar reference (which uses the
     // scalar watertight test on the same scene): soups, a shared-edge grid with spheres, and
     // rays exactly through grid vertices and edges.
-    let opts = BuildOptions { watertight: true, ..BuildOptions::default() };
+    let opts = BuildOptions { watertight: true, keep_bvh2: true, ..BuildOptions::default() };
     let soup = random_soup(3000, 0.08, 31);
     let scene = scene_of(&[&soup], &[], &opts);
     assert_eq!(scene.triangle_test(), raypack::geometry::TriangleTest::Watertight);
@@ -235,8 +235,18 @@ fn bvh8_invariants_for_every_collapse() {
         let bounds = prim_bounds(&scene);
         for method in [CollapseMethod::Optimal, CollapseMethod::Greedy] {
             let opts = CollapseOptions { method, ..CollapseOptions::default() };
-            let b4: Bvh8<Tri4> = collapse(scene.bvh2(), |id| scene.prim_shape(id), scene.num_triangles() as u32, &opts);
-            let b8: Bvh8<Tri8> = collapse(scene.bvh2(), |id| scene.prim_shape(id), scene.num_triangles() as u32, &opts);
+            let b4: Bvh8<Tri4> = collapse(
+                scene.bvh2().expect("binary BVH kept"),
+                |id| scene.prim_shape(id),
+                scene.num_triangles() as u32,
+                &opts,
+            );
+            let b8: Bvh8<Tri8> = collapse(
+                scene.bvh2().expect("binary BVH kept"),
+                |id| scene.prim_shape(id),
+                scene.num_triangles() as u32,
+                &opts,
+            );
             validate_bvh8(&b4, &bounds).unwrap_or_else(|e| panic!("{what} {method:?} Tri4: {e}"));
             validate_bvh8(&b8, &bounds).unwrap_or_else(|e| panic!("{what} {method:?} Tri8: {e}"));
             // Both block widths and both collapses give the reference's hits.
@@ -265,10 +275,14 @@ fn bvh8_invariants_for_every_collapse() {
 fn optimal_collapse_beats_greedy_sah() {
     let soup = random_soup(20_000, 0.03, 8);
     let scene = scene_of(&[&soup], &[], &BuildOptions::default());
-    let opt: Bvh8<Tri4> =
-        collapse(scene.bvh2(), |id| scene.prim_shape(id), scene.num_triangles() as u32, &CollapseOptions::default());
+    let opt: Bvh8<Tri4> = collapse(
+        scene.bvh2().expect("binary BVH kept"),
+        |id| scene.prim_shape(id),
+        scene.num_triangles() as u32,
+        &CollapseOptions::default(),
+    );
     let greedy: Bvh8<Tri4> = collapse(
-        scene.bvh2(),
+        scene.bvh2().expect("binary BVH kept"),
         |id| scene.prim_shape(id),
         scene.num_triangles() as u32,
         &CollapseOptions { method: CollapseMethod::Greedy, ..Default::default() },

@@ -39,8 +39,12 @@ fn commit_and_compare(dir: &Path, opts: &BuildOptions) -> raypack::CacheReport {
     assert!(bytes(&cached.bvh8().nodes) == bytes(&fresh.bvh8().nodes));
     assert!(bytes(&cached.bvh8().tris) == bytes(&fresh.bvh8().tris));
     assert!(bytes(&cached.bvh8().spheres) == bytes(&fresh.bvh8().spheres));
-    assert!(bytes(&cached.bvh2().nodes) == bytes(&fresh.bvh2().nodes));
-    assert_eq!(cached.bvh2().prim_ids, fresh.bvh2().prim_ids);
+    // The binary BVH is cached when the build keeps it, and only then.
+    assert_eq!(cached.bvh2().is_some(), opts.keep_bvh2);
+    if let (Some(c), Some(f)) = (cached.bvh2(), fresh.bvh2()) {
+        assert!(bytes(&c.nodes) == bytes(&f.nodes));
+        assert_eq!(c.prim_ids, f.prim_ids);
+    }
     assert_eq!(cached.bounds(), fresh.bounds());
     for r in random_through_bounds(&fresh.bounds(), 2000, 7) {
         let (a, b) = (cached.intersect1(&r), fresh.intersect1(&r));
@@ -56,14 +60,16 @@ fn commit_and_compare(dir: &Path, opts: &BuildOptions) -> raypack::CacheReport {
 
 #[test]
 fn round_trip_traces_like_a_fresh_build() {
-    let dir = tempfile::tempdir().unwrap();
-    let opts = BuildOptions::default();
-    let first = commit_and_compare(dir.path(), &opts);
-    assert!(!first.loaded && first.rejected.is_none() && first.write_error.is_none(), "{first:?}");
-    assert!(first.path.exists());
-    let second = commit_and_compare(dir.path(), &opts);
-    assert!(second.loaded && second.warnings().is_empty(), "{second:?}");
-    assert_eq!(second.path, first.path);
+    for keep_bvh2 in [false, true] {
+        let dir = tempfile::tempdir().unwrap();
+        let opts = BuildOptions { keep_bvh2, ..BuildOptions::default() };
+        let first = commit_and_compare(dir.path(), &opts);
+        assert!(!first.loaded && first.rejected.is_none() && first.write_error.is_none(), "{first:?}");
+        assert!(first.path.exists());
+        let second = commit_and_compare(dir.path(), &opts);
+        assert!(second.loaded && second.warnings().is_empty(), "{second:?}");
+        assert_eq!(second.path, first.path);
+    }
 }
 
 /// Damages the cache file with `damage`, then expects the next commit to reject it with an

@@ -10,7 +10,8 @@ use raypack::{BuildOptions, Hit, Ray, Scene, SplitMethod, Vec3};
 /// Compares the reference BVH with brute force on `rays`; returns the number compared.
 fn check(scene: &Scene, rays: &[Ray], what: &str) -> usize {
     let bounds: Vec<_> = (0..scene.num_prims() as u32).map(|p| scene.prim_bounds(p)).collect();
-    validate_bvh2(scene.bvh2(), &bounds).unwrap_or_else(|e| panic!("{what}: invalid BVH: {e}"));
+    validate_bvh2(scene.bvh2().expect("binary BVH kept"), &bounds)
+        .unwrap_or_else(|e| panic!("{what}: invalid BVH: {e}"));
     let mut hits = 0;
     for (i, ray) in rays.iter().enumerate() {
         let bvh = scene.intersect1_reference(ray);
@@ -94,7 +95,7 @@ fn degenerate_inputs_build_valid_trees() {
         for leaf in [1, 4] {
             let scene = scene_of(&[mesh], &[], &BuildOptions { max_leaf_size: leaf, ..BuildOptions::default() });
             let bounds: Vec<_> = (0..scene.num_prims() as u32).map(|p| scene.prim_bounds(p)).collect();
-            validate_bvh2(scene.bvh2(), &bounds).unwrap_or_else(|e| panic!("{what}: {e}"));
+            validate_bvh2(scene.bvh2().expect("binary BVH kept"), &bounds).unwrap_or_else(|e| panic!("{what}: {e}"));
             for r in random_rays(&scene, 2000, 3) {
                 assert_eq!(scene.intersect1_reference(&r).t.to_bits(), scene.intersect1_brute_force(&r).t.to_bits());
             }
@@ -116,9 +117,10 @@ fn sah_beats_median_split() {
         }),
         ("sphere", uv_sphere(100, 100)),
     ] {
-        let sah = scene_of(&[&mesh], &[], &BuildOptions::default()).bvh_stats();
+        let sah = scene_of(&[&mesh], &[], &BuildOptions::default()).bvh_stats().expect("kept");
         let med = scene_of(&[&mesh], &[], &BuildOptions { split: SplitMethod::Median, ..BuildOptions::default() })
-            .bvh_stats();
+            .bvh_stats()
+            .expect("kept");
         eprintln!("{what}: SAH {sah}\n{what}: median {med}");
         assert!(
             sah.sah_cost < med.sah_cost,
@@ -138,14 +140,14 @@ fn build_is_identical_whatever_the_thread_count() {
     mesh.append(&uv_sphere(60, 120));
     let spheres: Vec<(Vec3, f32)> = (0..300).map(|i| (Vec3::new(i as f32 * 0.006 - 0.9, 0.1, -0.2), 0.01)).collect();
     for watertight in [false, true] {
-        let opts = BuildOptions { watertight, ..BuildOptions::default() };
+        let opts = BuildOptions { watertight, keep_bvh2: true, ..BuildOptions::default() };
         let build = |threads| {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             pool.install(|| scene_of(&[&mesh], &spheres, &opts))
         };
         let (a, b) = (build(1), build(2));
-        assert_eq!(a.bvh2().prim_ids, b.bvh2().prim_ids);
-        assert_eq!(a.bvh2().nodes, b.bvh2().nodes);
+        assert_eq!(a.bvh2().unwrap().prim_ids, b.bvh2().unwrap().prim_ids);
+        assert_eq!(a.bvh2().unwrap().nodes, b.bvh2().unwrap().nodes);
         assert_eq!(bvh8_bits(&a), bvh8_bits(&b), "BVH8 differs between 1 and 2 threads (watertight {watertight})");
         assert!(a.bvh8().tris.len() > 10_000 && !a.bvh8().spheres.is_empty());
     }

@@ -49,7 +49,7 @@ fn commit(meshes: &[&Mesh]) -> Scene {
     for mesh in meshes {
         b.add_mesh(&mesh.positions, &mesh.indices, m).expect("valid mesh");
     }
-    b.commit(&BuildOptions::default()).0
+    b.commit(&BuildOptions { keep_bvh2: true, ..BuildOptions::default() }).0
 }
 
 /// Thin slivers (one vertex `1e-5` of the edge length off the opposite edge), needles, exact
@@ -102,7 +102,7 @@ fn triangles_only(scene: &Scene) -> Scene {
     let m = b.add_material(Material::default());
     b.add_mesh(&t.positions, &t.indices, m).expect("committed triangles are valid");
     b.set_camera(scene.camera_or_framing(4.0 / 3.0));
-    let (s, report) = b.commit(&BuildOptions::default());
+    let (s, report) = b.commit(&BuildOptions { keep_bvh2: true, ..BuildOptions::default() });
     assert_eq!(report.dropped(), 0, "re-committing committed triangles drops nothing");
     s
 }
@@ -139,7 +139,7 @@ struct Crossing {
 /// (traverses the reference BVH with grown boxes, so a bug in the kernels under test cannot
 /// hide a candidate).
 fn candidates(scene: &Scene, ray: &Ray) -> Vec<u32> {
-    let bvh = scene.bvh2();
+    let bvh = scene.bvh2().expect("binary BVH kept");
     let inv = ray.inv_dir();
     let grown = |b: &raypack::math::Aabb| {
         let mag = b.min.abs().max(b.max.abs()).max_element().max(ray.origin.abs().max_element());
@@ -570,7 +570,7 @@ fn third_party_scenes_agree_with_embree() {
     for (file, res) in files {
         let path = root.join(&file);
         let builder = raypack::io::load_scene(Path::new(&path)).unwrap_or_else(|e| panic!("{file}: {e}"));
-        let (scene, _) = builder.commit(&BuildOptions::default());
+        let (scene, _) = builder.commit(&BuildOptions { keep_bvh2: true, ..BuildOptions::default() });
         let scene = triangles_only(&scene);
         let sets = ray_sets(&scene, res, 60_000, 30_000);
         let (f, n) = crosscheck(&file, &scene, &sets, false);
@@ -586,7 +586,7 @@ fn third_party_scenes_agree_with_embree() {
 /// and sliver scenes and, when `RAYPACK_SCENES` is set, the Stanford dragon.
 #[test]
 fn watertight_agrees_with_robust_embree() {
-    let opts = BuildOptions { watertight: true, ..BuildOptions::default() };
+    let opts = BuildOptions { watertight: true, keep_bvh2: true, ..BuildOptions::default() };
     let with = |meshes: &[&Mesh]| {
         let mut b = SceneBuilder::new();
         let m = b.add_material(Material::diffuse(Vec3::splat(0.5)));

@@ -155,7 +155,7 @@ fn obj_material_library_with_a_short_colour_is_a_warning_not_a_panic() {
         "{warnings:?}"
     );
     // The default material, not a half-read lamp: nothing emits.
-    let (scene, _) = b.commit(&BuildOptions::default());
+    let (scene, _) = b.commit(&BuildOptions { keep_bvh2: true, ..BuildOptions::default() });
     assert!(scene.materials.iter().all(|m| m.emission == Vec3::ZERO));
 }
 
@@ -245,7 +245,7 @@ fn sphere_hit_whose_point_rounds_onto_the_centre_has_finite_coordinates() {
     let m = b.add_material(Material::default());
     let center = Vec3::new(3.875, 1.844e18, 2.25);
     b.add_sphere(center, 2.125, m).unwrap();
-    let (scene, report) = b.commit(&BuildOptions::default());
+    let (scene, report) = b.commit(&BuildOptions { keep_bvh2: true, ..BuildOptions::default() });
     assert_eq!(report.spheres, 1);
     let ray = Ray::new(center, Vec3::new(2.125, 1e18, 0.0));
     let hit = scene.intersect1(&ray);

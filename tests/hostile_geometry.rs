@@ -29,7 +29,7 @@ fn commit_both(mesh: &Mesh, spheres: &[(Vec3, f32)]) -> Vec<(Scene, CommitReport
                 // Invalid spheres are refused here or dropped at commit; either way not traced.
                 let _ = b.add_sphere(c, r, m);
             }
-            b.commit(&BuildOptions { watertight, ..BuildOptions::default() })
+            b.commit(&BuildOptions { watertight, keep_bvh2: true, ..BuildOptions::default() })
         })
         .collect()
 }
@@ -39,7 +39,8 @@ fn commit_both(mesh: &Mesh, spheres: &[(Vec3, f32)]) -> Vec<(Scene, CommitReport
 fn check(what: &str, scene: &Scene, rays: &[Ray]) -> usize {
     let test = scene.triangle_test().name();
     let bounds: Vec<_> = (0..scene.num_prims() as u32).map(|p| scene.prim_bounds(p)).collect();
-    validate_bvh2(scene.bvh2(), &bounds).unwrap_or_else(|e| panic!("{what} ({test}): BVH2: {e}"));
+    validate_bvh2(scene.bvh2().expect("binary BVH kept"), &bounds)
+        .unwrap_or_else(|e| panic!("{what} ({test}): BVH2: {e}"));
     validate_bvh8(scene.bvh8(), &bounds).unwrap_or_else(|e| panic!("{what} ({test}): BVH8: {e}"));
     let want: Vec<Hit> = rays.iter().map(|r| scene.intersect1_brute_force(r)).collect();
     let same = |q: &str, i: usize, got: &Hit| {

@@ -41,7 +41,7 @@ fn scene(watertight: bool) -> Scene {
     let s = uv_sphere(24, 48).map_positions(|p| p * 0.8);
     let g = grid(20, 20).map_positions(|p| p * 2.0 + Vec3::new(0.0, 0.0, -1.5));
     let spheres = [(Vec3::new(1.2, 1.2, 0.0), 0.3), (Vec3::new(-1.2, 0.5, 0.5), 0.2)];
-    scene_of(&[&s, &g], &spheres, &BuildOptions { watertight, ..BuildOptions::default() })
+    scene_of(&[&s, &g], &spheres, &BuildOptions { watertight, keep_bvh2: true, ..BuildOptions::default() })
 }
 
 /// The hostile variants of `base` rays on `scene`, each with its name.

@@ -147,7 +147,7 @@ fn pass_throughs(scene: &Scene, rays: &[Aimed]) -> Vec<(&'static str, usize)> {
 fn check(name: &str, mesh: &Mesh, rays: &[Aimed]) {
     assert!(rays.len() > 1000, "{name}: only {} rays", rays.len());
     for watertight in [false, true] {
-        let scene = scene_of(&[mesh], &[], &BuildOptions { watertight, ..BuildOptions::default() });
+        let scene = scene_of(&[mesh], &[], &BuildOptions { watertight, keep_bvh2: true, ..BuildOptions::default() });
         let counts = pass_throughs(&scene, rays);
         let test = scene.triangle_test().name();
         let list: Vec<String> = counts.iter().map(|(q, n)| format!("{q} {n}")).collect();
@@ -187,7 +187,7 @@ fn no_ray_passes_through_the_stanford_dragon() {
     let Some(dir) = scenes_dir("watertight dragon") else { return };
     let path = dir.join("models/stanford-dragon-871k.ply");
     let builder = raypack::io::load_scene(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let (loaded, _) = builder.commit(&BuildOptions::default());
+    let (loaded, _) = builder.commit(&BuildOptions { keep_bvh2: true, ..BuildOptions::default() });
     let mesh = Mesh { positions: loaded.triangles.positions.clone(), indices: loaded.triangles.indices.clone() };
     drop(loaded);
     let rays = aimed_rays(&mesh, 8);
@@ -209,7 +209,7 @@ fn watertight_bvh_round_trips_through_the_cache() {
     };
     let rays = aimed_rays(&mesh, 1);
     for watertight in [true, false, true] {
-        let opts = BuildOptions { watertight, ..BuildOptions::default() };
+        let opts = BuildOptions { watertight, keep_bvh2: true, ..BuildOptions::default() };
         let (cached, _, report) = builder().commit_cached(&opts, dir.path());
         let (fresh, _) = builder().commit(&opts);
         assert_eq!(cached.triangle_test(), fresh.triangle_test());

@@ -181,6 +181,8 @@ impl SceneInput {
             split: if flags & 4 != 0 { SplitMethod::Median } else { SplitMethod::Sah },
             watertight: flags & 8 != 0,
             traversal_cost: if flags & 16 != 0 { b.f32() } else { 1.0 },
+            // The reference traversal the kernels are compared with.
+            keep_bvh2: true,
             ..BuildOptions::default()
         };
         let (nv, nt, ns, nr) = (b.u8() % 65, b.u8() % 129, b.u8() % 9, b.u8() % 33);
@@ -294,7 +296,7 @@ impl SceneInput {
         assert_eq!(report.spheres + report.dropped_spheres, self.spheres.len());
         assert_eq!((scene.num_triangles(), scene.num_spheres()), (report.triangles, report.spheres));
         let bounds: Vec<_> = (0..scene.num_prims() as u32).map(|p| scene.prim_bounds(p)).collect();
-        if let Err(e) = raypack::bvh::validate::validate_bvh2(scene.bvh2(), &bounds) {
+        if let Err(e) = raypack::bvh::validate::validate_bvh2(scene.bvh2().expect("kept"), &bounds) {
             panic!("invalid BVH2 for {:?}: {e}", self.options);
         }
         for spec in &self.rays {

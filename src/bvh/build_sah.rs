@@ -57,6 +57,11 @@ pub struct BuildOptions {
     /// How the binary tree is collapsed into the 8-wide BVH the kernels traverse (costs and
     /// leaf limits; see [`crate::bvh::CollapseOptions`]).
     pub collapse: crate::bvh::CollapseOptions,
+    /// Keep the binary BVH after the collapse, for the scalar reference queries
+    /// ([`crate::Scene::intersect1_reference`]) and its statistics. Off by default: the
+    /// kernels only traverse the 8-wide BVH, and the binary one costs another 39 bytes per
+    /// triangle (Stanford dragon: 34.1 MB beside the BVH8's 59.0 MB).
+    pub keep_bvh2: bool,
 }
 
 impl Default for BuildOptions {
@@ -69,6 +74,7 @@ impl Default for BuildOptions {
             traversal_cost: 1.0,
             watertight: false,
             collapse: crate::bvh::CollapseOptions::default(),
+            keep_bvh2: false,
         }
     }
 }
@@ -215,7 +221,9 @@ impl PrimInfo {
 /// Builds a binary BVH over `prims` (reordered in place). Primitive ids in the leaves refer
 /// to `BuildPrim::id`. An empty input gives a tree with one empty leaf.
 pub fn build_bvh2(prims: &mut [BuildPrim], opts: &BuildOptions) -> Bvh2 {
-    build_bvh2_kinds(prims, opts, u32::MAX)
+    let slots = build_slots(prims, opts, u32::MAX);
+    let nodes = compact(&slots, prims);
+    Bvh2 { nodes, prim_ids: prims.iter().map(|p| p.id()).collect() }
 }
 
 /// [`build_bvh2`] for a mix of two primitive kinds: ids below `first_of_second_kind` are
@@ -223,20 +231,38 @@ pub fn build_bvh2(prims: &mut [BuildPrim], opts: &BuildOptions) -> Bvh2 {
 /// leaf that would is split into one leaf per kind under an inner node, so that leaf blocks,
 /// which hold one kind, can be filled straight from the binary leaves.
 pub fn build_bvh2_kinds(prims: &mut [BuildPrim], opts: &BuildOptions, first_of_second_kind: u32) -> Bvh2 {
+    let slots = build_slots(prims, opts, first_of_second_kind);
+    let nodes = compact(&slots, prims);
+    Bvh2 { nodes, prim_ids: prims.iter().map(|p| p.id()).collect() }
+}
+
+/// A node in the reserved-range build array: a leaf's first primitive and count (> 0), or
+/// an inner node's right child slot and 0 (its left child is the next slot). Boxes are not
+/// stored: [`compact`] recomputes them from the primitives, which keeps the array, two
+/// slots per primitive, at 8 bytes a slot (with boxes it was 32, and the largest
+/// allocation of the build: 56 MB of its 118 MB peak on the Stanford dragon).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+struct Slot {
+    a: u32,
+    count: u32,
+}
+
+/// The binned SAH build into the reserved-range slots that [`compact`] renumbers.
+fn build_slots(prims: &mut [BuildPrim], opts: &BuildOptions, first_of_second_kind: u32) -> Vec<Slot> {
     let n = prims.len();
     if n == 0 {
-        return Bvh2 { nodes: vec![Bvh2Node { bounds: Aabb::EMPTY, start: 0, count: 0 }], prim_ids: Vec::new() };
+        return Vec::new();
     }
     // Reserved-range slots (see the module docs): leaves hold `start, count > 0`, inner
     // nodes `start` = their right child's slot (the left child is the next slot) and
     // `count` = 0. Zero-filled memory costs nothing until touched, and only used slots are
     // ever read.
-    let mut slots: Vec<Bvh2Node> = bytemuck::zeroed_vec(2 * n - 1);
+    let mut slots: Vec<Slot> = bytemuck::zeroed_vec(2 * n - 1);
     let ctx = Ctx { opts, bins: opts.bin_count(), max_leaf: opts.max_leaf_size.max(1), first_of_second_kind };
     let info = PrimInfo::of_par(prims);
     build_rec(&ctx, prims, 0, &mut slots, 0, info, 0, &mut Scratch::new());
-    let prim_ids = prims.iter().map(|p| p.id()).collect();
-    Bvh2 { nodes: compact(&slots), prim_ids }
+    slots
 }
 
 struct Ctx<'a> {
@@ -254,7 +280,7 @@ fn build_rec(
     ctx: &Ctx,
     prims: &mut [BuildPrim],
     first: usize,
-    slots: &mut [Bvh2Node],
+    slots: &mut [Slot],
     base: u32,
     info: PrimInfo,
     depth: usize,
@@ -264,7 +290,7 @@ fn build_rec(
     debug_assert_eq!(slots.len(), 2 * n - 1);
     let split = if n == 1 { None } else { choose_split(ctx, prims, &info, depth, scratch) };
     let Some((mid, li, ri)) = split else {
-        return make_leaf(ctx, prims, first, slots, base, &info);
+        return make_leaf(ctx, prims, first, slots, base);
     };
     debug_assert!(mid > 0 && mid < n);
     let (lp, rp) = prims.split_at_mut(mid);
@@ -282,25 +308,23 @@ fn build_rec(
         build_rec(ctx, lp, first, ls, left, li, depth + 1, scratch);
         build_rec(ctx, rp, first + nl, rs, right, ri, depth + 1, scratch);
     }
-    slots[0] = Bvh2Node { bounds: info.bounds.aabb(), start: right, count: 0 };
+    slots[0] = Slot { a: right, count: 0 };
 }
 
 /// Writes a leaf over `prims`, or, when they mix the two kinds, an inner node over one
 /// leaf per kind (a subtree of `n >= 2` primitives has the 3 slots this needs).
-fn make_leaf(ctx: &Ctx, prims: &mut [BuildPrim], first: usize, slots: &mut [Bvh2Node], base: u32, info: &PrimInfo) {
+fn make_leaf(ctx: &Ctx, prims: &mut [BuildPrim], first: usize, slots: &mut [Slot], base: u32) {
     let n = prims.len();
     let k = ctx.first_of_second_kind;
     let nl = partition(prims, |p| p.id() < k);
     if nl == 0 || nl == n {
-        slots[0] = Bvh2Node { bounds: info.bounds.aabb(), start: first as u32, count: n as u32 };
+        slots[0] = Slot { a: first as u32, count: n as u32 };
         return;
     }
-    let (lp, rp) = prims.split_at(nl);
     let right = 2 * nl;
-    slots[0] = Bvh2Node { bounds: info.bounds.aabb(), start: base + right as u32, count: 0 };
-    slots[1] = Bvh2Node { bounds: PrimInfo::of(lp).bounds.aabb(), start: first as u32, count: nl as u32 };
-    slots[right] =
-        Bvh2Node { bounds: PrimInfo::of(rp).bounds.aabb(), start: (first + nl) as u32, count: (n - nl) as u32 };
+    slots[0] = Slot { a: base + right as u32, count: 0 };
+    slots[1] = Slot { a: first as u32, count: nl as u32 };
+    slots[right] = Slot { a: (first + nl) as u32, count: (n - nl) as u32 };
 }
 
 /// Chooses where to split `prims` and partitions them; returns the size of the left part
@@ -523,24 +547,33 @@ pub fn pad_outward(b: &Aabb) -> Aabb {
 }
 
 /// Renumbers the reserved-range slots depth first so that siblings are adjacent (see
-/// [`build_rec`] for the slot encoding), padding every box with [`pad_outward`].
-fn compact(slots: &[Bvh2Node]) -> Vec<Bvh2Node> {
+/// [`Slot`]), computing every box from the primitives (`prims`, in their final order) and
+/// padding it with [`pad_outward`].
+fn compact(slots: &[Slot], prims: &[BuildPrim]) -> Vec<Bvh2Node> {
+    if slots.is_empty() {
+        // The empty tree: one leaf with `count == 0` and empty bounds.
+        return vec![Bvh2Node { bounds: Aabb::EMPTY, start: 0, count: 0 }];
+    }
     let mut nodes = Vec::with_capacity(slots.len() / 2 + 1);
     nodes.push(Bvh2Node { bounds: Aabb::EMPTY, start: 0, count: 0 });
-    // (slot index, final index)
-    let mut stack = vec![(0u32, 0u32)];
-    while let Some((s, f)) = stack.pop() {
-        let slot = slots[s as usize];
-        if slot.count > 0 {
-            nodes[f as usize] = Bvh2Node { bounds: pad_outward(&slot.bounds), ..slot };
-        } else {
-            let c = nodes.len() as u32;
-            nodes[f as usize] = Bvh2Node { bounds: pad_outward(&slot.bounds), start: c, count: 0 };
-            nodes.push(Bvh2Node { bounds: Aabb::EMPTY, start: 0, count: 0 });
-            nodes.push(Bvh2Node { bounds: Aabb::EMPTY, start: 0, count: 0 });
-            stack.push((slot.start, c + 1));
-            stack.push((s + 1, c));
-        }
-    }
+    compact_rec(slots, prims, 0, 0, &mut nodes);
     nodes
+}
+
+/// Writes slot `s` as node `f` and its subtree after it; returns the subtree's exact box.
+fn compact_rec(slots: &[Slot], prims: &[BuildPrim], s: usize, f: usize, nodes: &mut Vec<Bvh2Node>) -> Box4 {
+    let slot = slots[s];
+    if slot.count > 0 {
+        let (a, n) = (slot.a as usize, slot.count as usize);
+        let b = prims[a..a + n].iter().fold(Box4::EMPTY, |b, p| b.union(&Box4 { lower: p.lower, upper: p.upper }));
+        nodes[f] = Bvh2Node { bounds: pad_outward(&b.aabb()), start: slot.a, count: slot.count };
+        return b;
+    }
+    let c = nodes.len();
+    nodes.extend([Bvh2Node { bounds: Aabb::EMPTY, start: 0, count: 0 }; 2]);
+    let lb = compact_rec(slots, prims, s + 1, c, nodes);
+    let rb = compact_rec(slots, prims, slot.a as usize, c + 1, nodes);
+    let b = lb.union(&rb);
+    nodes[f] = Bvh2Node { bounds: pad_outward(&b.aabb()), start: c as u32, count: 0 };
+    b
 }

@@ -124,7 +124,9 @@ impl RayLog {
 
 /// Mean primitive intersection tests per ray of `kind` over `rays`, with the scalar reference
 /// traversal of the binary BVH (closest hit for camera and bounce rays, any hit for shadow
-/// rays), or the primitive count with brute force. `None` without rays.
+/// rays) — or, when the build did not keep it, a scalar near-to-far walk of the 8-wide BVH
+/// counting the primitives of each leaf it opens — or the primitive count with brute force.
+/// `None` without rays.
 pub fn tests_per_ray(scene: &Scene, rays: &[Ray], kind: RayKind, brute_force: bool) -> Option<f64> {
     if rays.is_empty() {
         return None;
@@ -132,17 +134,21 @@ pub fn tests_per_ray(scene: &Scene, rays: &[Ray], kind: RayKind, brute_force: bo
     if brute_force {
         return Some(scene.num_prims() as f64);
     }
+    let Some(bvh2) = scene.bvh2() else {
+        let tests: u64 = rays.iter().map(|r| bvh8_tests(scene, r, kind == RayKind::Shadow)).sum();
+        return Some(tests as f64 / rays.len() as f64);
+    };
     let mut tests = 0u64;
     for ray in rays {
         match kind {
             RayKind::Shadow => {
-                scene.bvh2().occluded(ray, |prim| {
+                bvh2.occluded(ray, |prim| {
                     tests += 1;
                     scene.intersect_prim(prim, ray, ray.tfar).is_some()
                 });
             }
             _ => {
-                scene.bvh2().intersect(ray, |prim, tfar| {
+                bvh2.intersect(ray, |prim, tfar| {
                     tests += 1;
                     scene.intersect_prim(prim, ray, tfar)
                 });
@@ -150,4 +156,52 @@ pub fn tests_per_ray(scene: &Scene, rays: &[Ray], kind: RayKind, brute_force: bo
         }
     }
     Some(tests as f64 / rays.len() as f64)
+}
+
+/// Primitives tested by a scalar walk of the scene's 8-wide BVH (children visited near to
+/// far, boxes re-tested against the shrinking `tfar`); stops at the first hit for `any_hit`.
+fn bvh8_tests(scene: &Scene, ray: &Ray, any_hit: bool) -> u64 {
+    use crate::bvh::LeafKind;
+    use crate::bvh::bvh2::slab_test;
+    let bvh = scene.bvh8();
+    if !ray.is_valid() {
+        return 0;
+    }
+    let inv = ray.inv_dir();
+    let (mut tfar, mut tests) = (ray.tfar, 0u64);
+    let mut stack = vec![(0usize, None)];
+    while let Some((node, leaf)) = stack.pop() {
+        if let Some(r) = leaf {
+            let r: crate::bvh::NodeRef = r;
+            for k in 0..r.block_count() {
+                let b = r.first_block() + k;
+                let prims: &[u32] = match r.kind() {
+                    LeafKind::Triangles => &bvh.tris[b].prim,
+                    LeafKind::Spheres => &bvh.spheres[b].prim,
+                };
+                let lanes = r.lanes_of_block(k, prims.len());
+                for &prim in &prims[..lanes] {
+                    tests += 1;
+                    if let Some((t, _, _)) = scene.intersect_prim(prim, ray, tfar) {
+                        if any_hit {
+                            return tests;
+                        }
+                        tfar = t;
+                    }
+                }
+            }
+            continue;
+        }
+        let n = &bvh.nodes[node];
+        let mut hits: Vec<(f32, usize)> = (0..8)
+            .filter(|&k| !n.children[k].is_empty())
+            .filter_map(|k| slab_test(&n.child_bounds(k), ray.origin, inv, ray.tnear, tfar).map(|t| (t, k)))
+            .collect();
+        hits.sort_by(|a, b| b.0.total_cmp(&a.0));
+        for (_, k) in hits {
+            let c = n.children[k];
+            stack.push(if c.is_leaf() { (0, Some(c)) } else { (c.node_index(), None) });
+        }
+    }
+    tests
 }

@@ -289,7 +289,8 @@ pub(crate) struct Filtered {
 }
 
 impl Filtered {
-    /// Builds the binary BVH and collapses it into the 8-wide one.
+    /// Builds the binary BVH and collapses it into the 8-wide one (keeping the binary one
+    /// only with [`BuildOptions::keep_bvh2`]).
     pub(crate) fn build(self, opts: &BuildOptions) -> Scene {
         let Filtered { triangles, spheres, materials, lights, camera } = self;
         let nt = triangles.len();
@@ -304,14 +305,16 @@ impl Filtered {
         let bounds = prims.iter().fold(Aabb::EMPTY, |b, p| b.union(&p.bounds()));
         let bvh2 = build_bvh2_kinds(&mut prims, opts, nt as u32);
         drop(prims);
-        let mut scene = Scene { triangles, spheres, materials, lights, camera, bounds, bvh2, bvh8: Bvh8::default() };
+        let mut scene =
+            Scene { triangles, spheres, materials, lights, camera, bounds, bvh2: None, bvh8: Bvh8::default() };
         let test = TriangleTest::from_watertight(opts.watertight);
-        scene.bvh8 = collapse_for(&scene.bvh2, |id| scene.prim_shape(id), nt as u32, &opts.collapse, test);
+        scene.bvh8 = collapse_for(&bvh2, |id| scene.prim_shape(id), nt as u32, &opts.collapse, test);
+        scene.bvh2 = opts.keep_bvh2.then_some(bvh2);
         scene
     }
 
     /// The scene with acceleration structures that were built for exactly this geometry.
-    pub(crate) fn with_accel(self, bounds: Aabb, bvh2: Bvh2, bvh8: Bvh8) -> Scene {
+    pub(crate) fn with_accel(self, bounds: Aabb, bvh2: Option<Bvh2>, bvh8: Bvh8) -> Scene {
         let Filtered { triangles, spheres, materials, lights, camera } = self;
         Scene { triangles, spheres, materials, lights, camera, bounds, bvh2, bvh8 }
     }

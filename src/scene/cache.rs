@@ -36,7 +36,7 @@ use xxhash_rust::xxh3::Xxh3;
 
 /// Version of the file layout and of everything the key does not see; bump it whenever the
 /// builder, the collapse or a block layout changes what a given key would produce.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 /// First eight bytes of every cache file (the `\r\n` catches text-mode mangling, as PNG's does).
 pub const MAGIC: [u8; 8] = *b"RPKBVH\r\n";
 /// File name extension of cache files.
@@ -221,7 +221,8 @@ impl SceneBuilder {
 /// The acceleration structures a cache file holds.
 struct Accel {
     bounds: Aabb,
-    bvh2: Bvh2,
+    /// Stored as empty sections when the build did not keep it.
+    bvh2: Option<Bvh2>,
     bvh8: Bvh8,
 }
 
@@ -453,7 +454,8 @@ fn read_accel(f: &CacheFile) -> Result<Accel, CacheError> {
     };
     Ok(Accel {
         bounds,
-        bvh2: Bvh2 { nodes: f.section::<Bvh2Node>("bvh2.nodes")?, prim_ids: f.section("bvh2.prims")? },
+        bvh2: Some(Bvh2 { nodes: f.section::<Bvh2Node>("bvh2.nodes")?, prim_ids: f.section("bvh2.prims")? })
+            .filter(|b| !b.nodes.is_empty()),
         bvh8: Bvh8 {
             nodes: f.section::<Bvh8Node>("bvh8.nodes")?,
             tris: f.section::<DefaultTriBlock>("bvh8.tris")?,
@@ -471,17 +473,24 @@ fn read_accel(f: &CacheFile) -> Result<Accel, CacheError> {
 /// one pass in index order then sees each node's depth before its children's, so the check
 /// is linear and cache-friendly (a depth-first walk with a stack took 11% of a cached start).
 fn check_accel(a: &Accel, num_prims: usize) -> Result<(), String> {
-    let n2 = &a.bvh2.nodes;
+    if let Some(b) = &a.bvh2 {
+        check_bvh2(b, num_prims)?;
+    }
+    check_bvh8(&a.bvh8, num_prims)
+}
+
+fn check_bvh2(bvh2: &Bvh2, num_prims: usize) -> Result<(), String> {
+    let n2 = &bvh2.nodes;
     if n2.is_empty() {
         return Err("binary BVH without a root".into());
     }
-    if !a.bvh2.prim_ids.iter().all(|&p| (p as usize) < num_prims) {
+    if !bvh2.prim_ids.iter().all(|&p| (p as usize) < num_prims) {
         return Err("binary BVH refers to a primitive that does not exist".into());
     }
     // depth[i]: 0 while node i is unreached, else its depth (root = 1). An empty tree is a
     // root with `count == 0` that the traversal never enters.
     let mut depth = vec![0u8; n2.len()];
-    depth[0] = u8::from(!a.bvh2.prim_ids.is_empty());
+    depth[0] = u8::from(!bvh2.prim_ids.is_empty());
     for (i, n) in n2.iter().enumerate() {
         let d = depth[i];
         if d == 0 {
@@ -489,7 +498,7 @@ fn check_accel(a: &Accel, num_prims: usize) -> Result<(), String> {
         }
         let (start, count) = (n.start as usize, n.count as usize);
         if n.is_leaf() {
-            if start + count > a.bvh2.prim_ids.len() {
+            if start + count > bvh2.prim_ids.len() {
                 return Err(format!("binary BVH leaf {i} out of range"));
             }
         } else if start <= i || start + 1 >= n2.len() || d as usize >= MAX_DEPTH {
@@ -503,7 +512,10 @@ fn check_accel(a: &Accel, num_prims: usize) -> Result<(), String> {
         }
     }
 
-    let b8 = &a.bvh8;
+    Ok(())
+}
+
+fn check_bvh8(b8: &Bvh8, num_prims: usize) -> Result<(), String> {
     if b8.nodes.is_empty() {
         return Err("8-wide BVH without a root".into());
     }
@@ -560,8 +572,9 @@ fn store(dir: &Path, path: &Path, key: CacheKey, scene: &Scene) -> Result<(), Ca
     let mut w = SectionWriter::new();
     let bounds = [scene.bounds];
     w.push("bounds", &bounds);
-    w.push("bvh2.nodes", &scene.bvh2.nodes);
-    w.push("bvh2.prims", &scene.bvh2.prim_ids);
+    let (nodes, prims) = scene.bvh2.as_ref().map_or((&[][..], &[][..]), |b| (&b.nodes[..], &b.prim_ids[..]));
+    w.push("bvh2.nodes", nodes);
+    w.push("bvh2.prims", prims);
     w.push("bvh8.nodes", &scene.bvh8.nodes);
     w.push("bvh8.tris", &scene.bvh8.tris);
     w.push("bvh8.spheres", &scene.bvh8.spheres);
@@ -601,7 +614,7 @@ mod tests {
             b.add_sphere(crate::Vec3::Z, 0.5, m).unwrap();
             b
         };
-        let opts = BuildOptions::default();
+        let opts = BuildOptions { keep_bvh2: true, ..BuildOptions::default() };
         let (scene, _, report) = make().commit_cached(&opts, &dir);
         let key = CacheKey::of(&scene.triangles, &scene.spheres, &opts);
         let forge = |what: &str, edit: &dyn Fn(&mut Scene)| {
@@ -622,8 +635,8 @@ mod tests {
         });
         forge("4", &|s| s.bvh8.tris.clear());
         forge("5", &|s| s.bvh8.tris[0].prim[0] = 1 << 20);
-        forge("6", &|s| s.bvh2.nodes[0].start = 1 << 30);
-        forge("7", &|s| s.bvh2.prim_ids[0] = 1 << 20);
+        forge("6", &|s| s.bvh2.as_mut().unwrap().nodes[0].start = 1 << 30);
+        forge("7", &|s| s.bvh2.as_mut().unwrap().prim_ids[0] = 1 << 20);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -116,7 +116,8 @@ pub struct Scene {
     /// The camera from the scene file, if any.
     pub camera: Option<Camera>,
     pub(crate) bounds: Aabb,
-    pub(crate) bvh2: Bvh2,
+    /// The binary BVH, when [`crate::BuildOptions::keep_bvh2`] kept it.
+    pub(crate) bvh2: Option<Bvh2>,
     pub(crate) bvh8: Bvh8,
 }
 
@@ -152,9 +153,10 @@ impl Scene {
         }
     }
 
-    /// The binary BVH (the scalar reference structure).
-    pub fn bvh2(&self) -> &Bvh2 {
-        &self.bvh2
+    /// The binary BVH (the scalar reference structure), when the build kept it
+    /// ([`crate::BuildOptions::keep_bvh2`]).
+    pub fn bvh2(&self) -> Option<&Bvh2> {
+        self.bvh2.as_ref()
     }
 
     /// The 8-wide BVH the SIMD kernels traverse.
@@ -190,9 +192,9 @@ impl Scene {
         }
     }
 
-    /// Quality figures of the reference BVH.
-    pub fn bvh_stats(&self) -> BvhStats {
-        BvhStats::of_bvh2(&self.bvh2)
+    /// Quality figures of the reference BVH, when the build kept it.
+    pub fn bvh_stats(&self) -> Option<BvhStats> {
+        self.bvh2.as_ref().map(BvhStats::of_bvh2)
     }
 
     /// Bounds of primitive `prim`.
@@ -230,14 +232,23 @@ impl Scene {
         }
     }
 
-    /// Closest hit along `ray` (scalar reference traversal of the binary BVH).
+    /// Closest hit along `ray` (scalar reference traversal of the binary BVH). Without a
+    /// binary BVH ([`crate::BuildOptions::keep_bvh2`] off) it tests every primitive, as
+    /// [`Scene::intersect1_brute_force`] does: always right, slow on large scenes.
     pub fn intersect1_reference(&self, ray: &Ray) -> Hit {
-        self.bvh2.intersect(ray, |prim, tfar| self.intersect_prim(prim, ray, tfar))
+        match &self.bvh2 {
+            Some(bvh2) => bvh2.intersect(ray, |prim, tfar| self.intersect_prim(prim, ray, tfar)),
+            None => self.intersect1_brute_force(ray),
+        }
     }
 
-    /// True when anything lies in `(ray.tnear, ray.tfar]` (scalar reference traversal).
+    /// True when anything lies in `(ray.tnear, ray.tfar]` (scalar reference traversal; every
+    /// primitive without a binary BVH, as [`Scene::intersect1_reference`]).
     pub fn occluded1_reference(&self, ray: &Ray) -> bool {
-        self.bvh2.occluded(ray, |prim| self.intersect_prim(prim, ray, ray.tfar).is_some())
+        match &self.bvh2 {
+            Some(bvh2) => bvh2.occluded(ray, |prim| self.intersect_prim(prim, ray, ray.tfar).is_some()),
+            None => (0..self.num_prims() as u32).any(|prim| self.intersect_prim(prim, ray, ray.tfar).is_some()),
+        }
     }
 
     /// Closest hit by testing every primitive: the oracle for tests and the CS184

@@ -7,6 +7,8 @@ use raypack::{BuildOptions, Material, Ray, Scene, SceneBuilder, Vec3};
 use std::path::PathBuf;
 
 /// Commits `meshes` (and `spheres`: centre, radius) into a scene with one diffuse material.
+/// Keeps the binary BVH whatever `opts` say: tests compare the kernels with its reference
+/// traversal.
 pub fn scene_of(meshes: &[&Mesh], spheres: &[(Vec3, f32)], opts: &BuildOptions) -> Scene {
     let mut b = SceneBuilder::new();
     let m = b.add_material(Material::diffuse(Vec3::splat(0.5)));
@@ -16,7 +18,7 @@ pub fn scene_of(meshes: &[&Mesh], spheres: &[(Vec3, f32)], opts: &BuildOptions) 
     for &(c, r) in spheres {
         b.add_sphere(c, r, m).expect("valid sphere");
     }
-    b.commit(opts).0
+    b.commit(&BuildOptions { keep_bvh2: true, ..opts.clone() }).0
 }
 
 /// `n` rays with origins in the box grown by half its size and directions uniform on the
