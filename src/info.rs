@@ -24,6 +24,12 @@ pub struct InfoOptions {
     /// Also build Embree's BVH (MEDIUM and HIGH) over the same triangles, on as many threads
     /// as the caller's rayon pool has (needs the `embree` feature).
     pub against_embree: bool,
+    /// Build Embree's BVHs before raypack's instead of after them. The first builds of a
+    /// process touch fresh memory, whose page faults (zeroing, and in a virtual machine the
+    /// host's own faults) can cost a third of a 20M-triangle build; whichever tracer builds
+    /// second reuses pages the first freed. Comparing each tracer's figures from the run in
+    /// which it went first compares cold builds with cold builds.
+    pub embree_first: bool,
 }
 
 impl Default for InfoOptions {
@@ -34,6 +40,7 @@ impl Default for InfoOptions {
             validate: false,
             keep_bvh2: false,
             against_embree: false,
+            embree_first: false,
         }
     }
 }
@@ -196,6 +203,16 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, InfoErro
         embree_builds: Vec::new(),
         peak_resident_bytes: None,
     };
+    if opts.against_embree && opts.embree_first {
+        let (kept, _) = builder.clone().filter();
+        if !kept.spheres.is_empty() {
+            return Err(InfoError::Embree(format!(
+                "the Embree comparison supports triangle meshes only, but the scene has {} spheres",
+                kept.spheres.len()
+            )));
+        }
+        info.embree_builds = embree_builds(&kept.triangles.positions, &kept.triangles.indices)?;
+    }
     let mut builder = Some(builder);
     for (i, &quality) in opts.qualities.iter().enumerate() {
         let last = i + 1 == opts.qualities.len();
@@ -241,23 +258,29 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, InfoErro
             valid,
             peak_added_bytes,
         });
-        if last && opts.against_embree {
-            info.embree_builds = embree_builds(&scene)?;
+        if last && opts.against_embree && !opts.embree_first {
+            if scene.num_spheres() > 0 {
+                return Err(InfoError::Embree(format!(
+                    "the Embree comparison supports triangle meshes only, but the scene has {} spheres",
+                    scene.num_spheres()
+                )));
+            }
+            info.embree_builds = embree_builds(&scene.triangles.positions, &scene.triangles.indices)?;
         }
     }
     info.peak_resident_bytes = peak_resident_bytes();
     Ok(info)
 }
 
-/// Embree MEDIUM and HIGH builds of `scene`'s triangles on the current rayon pool's thread count.
+/// Embree MEDIUM and HIGH builds of a triangle mesh on the current rayon pool's thread count.
 #[cfg(feature = "embree")]
-fn embree_builds(scene: &Scene) -> Result<Vec<EmbreeBuildInfo>, InfoError> {
+fn embree_builds(positions: &[crate::math::Vec3], indices: &[[u32; 3]]) -> Result<Vec<EmbreeBuildInfo>, InfoError> {
     use crate::embree::{EmbreeOptions, EmbreeQuality, EmbreeScene};
     let mut out = Vec::new();
     for quality in [EmbreeQuality::Medium, EmbreeQuality::High] {
         let options = EmbreeOptions { quality, threads: rayon::current_num_threads(), ..EmbreeOptions::default() };
         let peak = BuildPeak::start();
-        let e = EmbreeScene::with_options(scene, options).map_err(|e| InfoError::Embree(e.to_string()))?;
+        let e = EmbreeScene::from_mesh(positions, indices, options).map_err(|e| InfoError::Embree(e.to_string()))?;
         out.push(EmbreeBuildInfo {
             quality: quality.name(),
             seconds: e.build_time().as_secs_f64(),
@@ -269,7 +292,7 @@ fn embree_builds(scene: &Scene) -> Result<Vec<EmbreeBuildInfo>, InfoError> {
 }
 
 #[cfg(not(feature = "embree"))]
-fn embree_builds(_: &Scene) -> Result<Vec<EmbreeBuildInfo>, InfoError> {
+fn embree_builds(_: &[crate::math::Vec3], _: &[[u32; 3]]) -> Result<Vec<EmbreeBuildInfo>, InfoError> {
     Ok(Vec::new())
 }
 

@@ -189,6 +189,10 @@ struct InfoArgs {
     /// Also time Embree's MEDIUM and HIGH builds of the same triangles on as many threads.
     #[arg(long, value_enum)]
     against: Option<AgainstArg>,
+    /// With --against: build Embree's BVHs first (the first builds of a process pay for
+    /// touching fresh memory; compare each tracer's figures from a run in which it went first).
+    #[arg(long, requires = "against")]
+    embree_first: bool,
 }
 
 /// A failure the CLI reports: bad input or environment exits with 2, as issue #2 asks.
@@ -412,6 +416,7 @@ fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
         validate: a.validate,
         keep_bvh2: a.keep_bvh2,
         against_embree: a.against.is_some(),
+        embree_first: a.embree_first,
         ..InfoOptions::default()
     };
     if let Some(q) = a.quality {
