@@ -174,3 +174,28 @@ fn bvh8_bits(scene: &Scene) -> Vec<u64> {
     }
     out
 }
+
+/// Without `keep_bvh2` the binary BVH is freed after the collapse; the reference queries then
+/// test every primitive and still give the brute-force answers, and the kernels are untouched.
+#[test]
+fn reference_queries_without_the_binary_bvh_fall_back_to_brute_force() {
+    let mesh = random_soup(3_000, 0.05, 31);
+    let spheres = [(Vec3::new(0.2, 0.1, -0.3), 0.2)];
+    let mut b = raypack::SceneBuilder::new();
+    let m = b.add_material(raypack::Material::default());
+    b.add_mesh(&mesh.positions, &mesh.indices, m).unwrap();
+    b.add_sphere(spheres[0].0, spheres[0].1, m).unwrap();
+    let (lean, _) = b.clone().commit(&BuildOptions::default());
+    let (kept, _) = b.commit(&BuildOptions { keep_bvh2: true, ..BuildOptions::default() });
+    assert!(lean.bvh2().is_none() && lean.bvh_stats().is_none() && kept.bvh2().is_some());
+    let mut hits = 0;
+    for r in random_rays(&kept, 5_000, 32) {
+        let want = kept.intersect1_brute_force(&r);
+        let got = lean.intersect1_reference(&r);
+        assert_eq!((got.prim, got.t.to_bits()), (want.prim, want.t.to_bits()));
+        assert_eq!(lean.occluded1_reference(&r), want.is_hit());
+        assert_eq!(lean.intersect1(&r).t.to_bits(), kept.intersect1(&r).t.to_bits());
+        hits += usize::from(want.is_hit());
+    }
+    assert!(hits > 500, "too few hits to mean anything: {hits}");
+}

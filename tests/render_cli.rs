@@ -98,3 +98,52 @@ fn same_seed_same_file_with_one_or_two_threads() {
     assert_eq!(run("1", "one.exr"), run("2", "two.exr"), "linear EXR output differs between -t 1 and -t 2");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `raypack info`: the binary BVH is reported only when kept, each commit's peak memory is
+/// measured, and `--against embree` (with or without `--embree-first`) adds Embree's builds.
+#[test]
+fn info_reports_what_it_keeps_and_embree_beside_it() {
+    let dir = scratch_dir("info");
+    let knot = raypack::generate::torus_knot(40, 8, 2.0, 3.0, 0.4, 0.05);
+    let mut obj = String::new();
+    for p in &knot.positions {
+        obj += &format!("v {} {} {}\n", p.x, p.y, p.z);
+    }
+    for [a, b, c] in &knot.indices {
+        obj += &format!("f {} {} {}\n", a + 1, b + 1, c + 1);
+    }
+    let scene = dir.join("knot.obj");
+    std::fs::write(&scene, obj).unwrap();
+    let info = |extra: &[&str]| -> Result<serde_json::Value, String> {
+        let args = [&["info", scene.to_str().unwrap(), "--quality", "fast", "--json"], extra].concat();
+        let out = Command::new(env!("CARGO_BIN_EXE_raypack")).args(&args).output().expect("runs");
+        if out.status.success() {
+            Ok(serde_json::from_slice(&out.stdout).unwrap())
+        } else {
+            Err(String::from_utf8_lossy(&out.stderr).into_owned())
+        }
+    };
+    let lean = info(&[]).unwrap();
+    let build = &lean["builds"][0];
+    assert!(build["bvh2"].is_null(), "{build}");
+    assert!(build["bvh8"]["bytes"].as_u64().unwrap() > 0);
+    if cfg!(target_os = "linux") {
+        assert!(build["peak_added_bytes"].as_u64().is_some(), "{build}");
+    }
+    let kept = info(&["--keep-bvh2"]).unwrap();
+    assert!(kept["builds"][0]["bvh2"]["sah_cost"].as_f64().unwrap() > 0.0);
+    for order in [&["--against", "embree"][..], &["--against", "embree", "--embree-first"][..]] {
+        match info(order) {
+            Ok(v) if cfg!(feature = "embree") => {
+                let e = v["embree_builds"].as_array().unwrap();
+                let names: Vec<_> = e.iter().map(|b| b["quality"].as_str().unwrap()).collect();
+                assert_eq!(names, ["medium", "high"], "{order:?}");
+                assert!(e.iter().all(|b| b["seconds"].as_f64().unwrap() > 0.0 && b["bytes"].as_u64().unwrap() > 0));
+                assert_eq!(v["builds"].as_array().unwrap().len(), 1, "raypack's build is still there");
+            }
+            Err(e) if !cfg!(feature = "embree") => assert!(e.contains("--features embree"), "{e}"),
+            other => panic!("{order:?}: {other:?}"),
+        }
+    }
+    assert!(info(&["--embree-first"]).is_err(), "--embree-first needs --against");
+}
