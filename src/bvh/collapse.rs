@@ -536,11 +536,13 @@ pub fn collapse_for<T: TriBlock>(
     use rayon::prelude::*;
     let bvh2 = pure_leaves(bvh2, first_sphere, &shape);
     let m = bvh2.nodes.len();
+    // Allocated and first written in parallel, as are the output arrays below: for large
+    // meshes the page faults of fresh memory are a large part of the cost.
     let p = Planned {
         bvh2: &bvh2,
         first_sphere,
-        plans: (0..m).map(|_| AtomicU64::new(0)).collect(),
-        counts: (0..m).map(|_| AtomicU32::new(0)).collect(),
+        plans: (0..m).into_par_iter().map(|_| AtomicU64::new(0)).collect(),
+        counts: (0..m).into_par_iter().map(|_| AtomicU32::new(0)).collect(),
     };
     let mut out = Bvh8 { nodes: vec![Bvh8Node::EMPTY], tris: Vec::new(), spheres: Vec::new(), test };
     if bvh2.is_empty() {
@@ -565,8 +567,12 @@ pub fn collapse_for<T: TriBlock>(
         end = (end.0 + s.0, end.1 + s.1, end.2 + s.2);
     }
     let top = bases.first().copied().unwrap_or(end);
-    out.nodes.resize(end.0, Bvh8Node::EMPTY);
-    out.tris.resize(end.1, T::EMPTY);
+    out.nodes.reserve_exact(end.0 - out.nodes.len());
+    out.tris.reserve_exact(end.1 - out.tris.len());
+    let grow = end.0 - out.nodes.len();
+    out.nodes.par_extend(rayon::iter::repeat_n(Bvh8Node::EMPTY, grow));
+    let grow = end.1 - out.tris.len();
+    out.tris.par_extend(rayon::iter::repeat_n(T::EMPTY, grow));
     out.spheres.resize(end.2, Sphere4::EMPTY);
     let (mut nodes, mut tris, mut spheres) =
         (&mut out.nodes[top.0..], &mut out.tris[top.1..], &mut out.spheres[top.2..]);
