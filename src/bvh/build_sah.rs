@@ -359,20 +359,29 @@ fn choose_split(
     let mut best = (f32::INFINITY, 0usize, 0usize); // (cost, axis, split bin)
     for axis in (0..3).filter(|&a| ext[a] > 0.0) {
         let b = &scratch.bins[axis * MAX_BINS..axis * MAX_BINS + k];
-        let (mut acc, mut cnt) = (Box4::EMPTY, 0u32);
+        // Empty bins change nothing: the right-hand area is carried over, and a split after
+        // an empty bin is the split before it (already costed; ties keep the first), so
+        // small nodes, whose bins are mostly empty, skip most of the work.
+        let (mut acc, mut cnt, mut area) = (Box4::EMPTY, 0u32, 0.0f32);
         for i in (1..k).rev() {
-            acc = acc.union(&b[i].bounds);
-            cnt += b[i].count;
-            scratch.right_area[i] = acc.half_area();
+            if b[i].count > 0 {
+                acc = acc.union(&b[i].bounds);
+                cnt += b[i].count;
+                area = acc.half_area();
+            }
+            scratch.right_area[i] = area;
             scratch.right_count[i] = cnt;
         }
         let (mut acc, mut cnt) = (Box4::EMPTY, 0u32);
         for i in 0..k - 1 {
+            if b[i].count == 0 {
+                continue;
+            }
             acc = acc.union(&b[i].bounds);
             cnt += b[i].count;
             let right = scratch.right_count[i + 1];
-            if cnt == 0 || right == 0 {
-                continue;
+            if right == 0 {
+                break;
             }
             let cost = acc.half_area() * cnt as f32 + scratch.right_area[i + 1] * right as f32;
             if cost < best.0 {
@@ -441,19 +450,25 @@ fn bin_mapping(cb: &Box4, axis: usize, k: usize) -> (f32, f32) {
 /// Fills the first `k` bins of each axis of `bins` with `prims`; large inputs bin in
 /// parallel chunks whose exact reduction keeps the result independent of the thread count.
 fn bin_prims(prims: &[BuildPrim], maps: &[(f32, f32); 3], k: usize, bins: &mut [Bin]) {
-    // All three axes' bin indices in one SIMD step; clamping in the float domain makes the
-    // truncating conversion exact (and maps the unused fourth lane to bin 0).
-    let lo = Vec4::new(maps[0].0, maps[1].0, maps[2].0, 0.0);
-    let scale = Vec4::new(maps[0].1, maps[1].1, maps[2].1, 0.0);
-    let top = Vec4::splat((k - 1) as f32);
+    use wide::f32x4;
+    // All three axes' bin indices in one SIMD step (one truncating conversion for the four
+    // lanes); clamping in the float domain makes it exact and maps the unused fourth lane
+    // to bin 0.
+    let lo = f32x4::new([maps[0].0, maps[1].0, maps[2].0, 0.0]);
+    let scale = f32x4::new([maps[0].1, maps[1].1, maps[2].1, 0.0]);
+    let top = f32x4::splat((k - 1) as f32);
     let bin_chunk = |chunk: &[BuildPrim], bins: &mut [Bin]| {
+        // As an array, and with indices masked to `MAX_BINS - 1` (a no-op after the clamp),
+        // the compiler sees every index in range and drops the bounds checks.
+        let bins: &mut [Bin; 3 * MAX_BINS] = bins.try_into().expect("3 * MAX_BINS bins");
         for a in 0..3 {
             bins[a * MAX_BINS..a * MAX_BINS + k].fill(Bin::EMPTY);
         }
         for p in chunk {
-            let idx = ((p.centroid2() - lo) * scale).min(top).max(Vec4::ZERO).as_uvec4();
+            let c: f32x4 = bytemuck::cast(p.centroid2());
+            let idx = ((c - lo) * scale).min(top).max(f32x4::ZERO).fast_trunc_int().to_array();
             for a in 0..3 {
-                let bin = &mut bins[a * MAX_BINS + idx[a] as usize];
+                let bin = &mut bins[a * MAX_BINS + (idx[a] as usize & (MAX_BINS - 1))];
                 bin.bounds.grow(p.lower, p.upper);
                 bin.count += 1;
             }
