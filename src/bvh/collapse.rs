@@ -402,7 +402,7 @@ impl<'a, S: Fn(u32) -> PrimShape + Sync> Emitter<'a, S> {
     fn fill<T: TriBlock>(&mut self, n: usize, out: &mut impl Sink<T>) -> Bvh8Node {
         let kids = self.children_of(n);
         let inner = kids.as_slice().iter().filter(|&&c| !self.is_leaf_root(c)).count();
-        let mut next = out.alloc_nodes(inner);
+        let first = out.alloc_nodes(inner);
         let mut node = Bvh8Node::EMPTY;
         let mut todo = Kids::default();
         for (slot, &c) in kids.as_slice().iter().enumerate() {
@@ -410,21 +410,18 @@ impl<'a, S: Fn(u32) -> PrimShape + Sync> Emitter<'a, S> {
                 self.leaf(c, out)
             } else {
                 todo.push(c);
-                next += 1;
-                NodeRef::inner((next - 1) as u32)
+                NodeRef::inner((first + todo.len - 1) as u32)
             };
             node.set_child(slot, &self.p.bvh2.nodes[c].bounds, r);
         }
-        let mut next = next - inner;
-        for &c in todo.as_slice() {
+        for (k, &c) in todo.as_slice().iter().enumerate() {
             match &mut self.defer {
-                Some((cut, list)) if self.p.count(c) <= *cut => list.push((next, c)),
+                Some((cut, list)) if self.p.count(c) <= *cut => list.push((first + k, c)),
                 _ => {
                     let child = self.fill(c, out);
-                    out.set_node(next, child);
+                    out.set_node(first + k, child);
                 }
             }
-            next += 1;
         }
         node
     }
