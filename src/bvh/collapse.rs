@@ -28,8 +28,8 @@ use crate::bvh::{Bvh2, Bvh2Node, Bvh8};
 use crate::geometry::{Sphere4, TriBlock, TriangleTest};
 use crate::math::{Aabb, Vec3};
 use std::borrow::Cow;
+use std::sync::atomic::AtomicU64;
 use std::sync::atomic::Ordering::Relaxed;
-use std::sync::atomic::{AtomicU32, AtomicU64};
 
 /// The shape of one primitive, as the collapse needs it to fill leaf blocks.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -128,21 +128,28 @@ impl Plan {
     }
 }
 
-/// The binary tree with its per-node plans and primitive counts, ready for emission.
+/// The binary tree with its per-node plans, ready for emission.
 struct Planned<'a> {
     bvh2: &'a Bvh2,
     first_sphere: u32,
     plans: Vec<AtomicU64>,
-    /// Primitives below each node.
-    counts: Vec<AtomicU32>,
 }
 
 impl Planned<'_> {
     fn plan(&self, n: usize) -> Plan {
         Plan(self.plans[n].load(Relaxed))
     }
+    /// Primitives below `n`: its subtree's range of `prim_ids`, from the start of its
+    /// leftmost leaf to the end of its rightmost (a walk of two paths, which the emission
+    /// only takes for leaf roots, shallow, and near the root; an array of counts would cost
+    /// 4 bytes a node of peak memory).
     fn count(&self, n: usize) -> u32 {
-        self.counts[n].load(Relaxed)
+        let mut r = n;
+        while !self.bvh2.nodes[r].is_leaf() {
+            r = self.bvh2.nodes[r].start as usize + 1;
+        }
+        let end = self.bvh2.nodes[r].start + self.bvh2.nodes[r].count;
+        end - self.first_prim(n) as u32
     }
     fn children(&self, n: usize) -> (usize, usize) {
         let s = self.bvh2.nodes[n].start as usize;
@@ -158,8 +165,8 @@ impl Planned<'_> {
     }
 }
 
-/// Runs the dynamic program bottom-up over `n`'s subtree, storing each node's [`Plan`] and
-/// primitive count; returns `(C(n, 1..=8), triangles, spheres)` of the subtree.
+/// Runs the dynamic program bottom-up over `n`'s subtree, storing each node's [`Plan`];
+/// returns `(C(n, 1..=8), triangles, spheres)` of the subtree.
 fn plan_rec(p: &Planned, opts: &CollapseOptions, block_m: u32, n: usize, depth: usize) -> ([f32; 8], u32, u32) {
     let node = p.bvh2.nodes[n];
     let area = node.bounds.half_area();
@@ -172,7 +179,6 @@ fn plan_rec(p: &Planned, opts: &CollapseOptions, block_m: u32, n: usize, depth: 
         let first = p.bvh2.prim_ids.get(node.start as usize).copied().unwrap_or(0);
         let (ntri, nsph) = if first < p.first_sphere { (node.count, 0) } else { (0, node.count) };
         p.plans[n].store(Plan::new(true, 0, &[(0, 1); 8]).0, Relaxed);
-        p.counts[n].store(node.count, Relaxed);
         return ([leaf_cost(ntri, nsph); 8], ntri, nsph);
     }
     let (l, r) = p.children(n);
@@ -214,7 +220,6 @@ fn plan_rec(p: &Planned, opts: &CollapseOptions, block_m: u32, n: usize, depth: 
         }
     }
     p.plans[n].store(Plan::new(leaf <= as_node, dist_k[7], &forest).0, Relaxed);
-    p.counts[n].store(ntri + nsph, Relaxed);
     (cost, ntri, nsph)
 }
 
@@ -506,7 +511,9 @@ fn shape_bounds(s: PrimShape) -> Aabb {
 
 /// Collapses `bvh2` into an 8-wide BVH with leaf blocks of `T` laid out for
 /// Möller–Trumbore. `shape(id)` gives the geometry of primitive `id`; ids below
-/// `first_sphere` are triangles, the others spheres.
+/// `first_sphere` are triangles, the others spheres. Every subtree of `bvh2` must hold a
+/// contiguous range of `prim_ids`, left subtree first, as [`crate::bvh::build_bvh2`]'s trees
+/// do.
 pub fn collapse<T: TriBlock>(
     bvh2: &Bvh2,
     shape: impl Fn(u32) -> PrimShape + Sync,
@@ -535,12 +542,7 @@ pub fn collapse_for<T: TriBlock>(
     let m = bvh2.nodes.len();
     // Allocated and first written in parallel, as are the output arrays below: for large
     // meshes the page faults of fresh memory are a large part of the cost.
-    let p = Planned {
-        bvh2: &bvh2,
-        first_sphere,
-        plans: (0..m).into_par_iter().map(|_| AtomicU64::new(0)).collect(),
-        counts: (0..m).into_par_iter().map(|_| AtomicU32::new(0)).collect(),
-    };
+    let p = Planned { bvh2: &bvh2, first_sphere, plans: (0..m).into_par_iter().map(|_| AtomicU64::new(0)).collect() };
     let mut out = Bvh8 { nodes: vec![Bvh8Node::EMPTY], tris: Vec::new(), spheres: Vec::new(), test };
     if bvh2.is_empty() {
         return out;
