@@ -236,16 +236,43 @@ impl SceneBuilder {
         }
 
         let ok = |p: Vec3| p.is_finite() && p.abs().max_element() <= MAX_COORDINATE;
+        // The checks run in parallel (the degeneracy test is the costly part of loading a
+        // mesh from the BVH cache); the compaction after them keeps the input order.
+        #[derive(Clone, Copy, PartialEq)]
+        enum Verdict {
+            Keep,
+            NonFinite,
+            Degenerate,
+        }
+        let verdicts: Vec<Verdict> = {
+            use rayon::prelude::*;
+            let t = &triangles;
+            (0..t.indices.len())
+                .into_par_iter()
+                .map(|i| {
+                    let [a, b, c] = t.vertices(i);
+                    if !(ok(a) && ok(b) && ok(c)) {
+                        Verdict::NonFinite
+                    } else if is_degenerate(a, b, c) {
+                        Verdict::Degenerate
+                    } else {
+                        Verdict::Keep
+                    }
+                })
+                .collect()
+        };
         let mut keep = 0usize;
-        for i in 0..triangles.indices.len() {
-            let [a, b, c] = triangles.vertices(i);
-            if !(ok(a) && ok(b) && ok(c)) {
-                report.dropped_non_finite += 1;
-                continue;
-            }
-            if is_degenerate(a, b, c) {
-                report.dropped_degenerate += 1;
-                continue;
+        for (i, &v) in verdicts.iter().enumerate() {
+            match v {
+                Verdict::NonFinite => {
+                    report.dropped_non_finite += 1;
+                    continue;
+                }
+                Verdict::Degenerate => {
+                    report.dropped_degenerate += 1;
+                    continue;
+                }
+                Verdict::Keep => {}
             }
             triangles.indices[keep] = triangles.indices[i];
             triangles.material[keep] = triangles.material[i];
