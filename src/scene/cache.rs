@@ -39,6 +39,8 @@ use xxhash_rust::xxh3::Xxh3;
 pub const FORMAT_VERSION: u32 = 3;
 /// First eight bytes of every cache file (the `\r\n` catches text-mode mangling, as PNG's does).
 pub const MAGIC: [u8; 8] = *b"RPKBVH\r\n";
+/// Sections of at least this many bytes are copied out of the mapping in parallel.
+const PARALLEL_COPY_BYTES: usize = 1 << 20;
 /// File name extension of cache files.
 pub const EXTENSION: &str = "rpbvh";
 
@@ -392,7 +394,7 @@ impl<'a> CacheFile<'a> {
     }
 
     /// Copies out section `name`, checking its element size and extent.
-    pub(crate) fn section<T: bytemuck::Pod>(&self, name: &str) -> Result<Vec<T>, CacheError> {
+    pub(crate) fn section<T: bytemuck::Pod + Send + Sync>(&self, name: &str) -> Result<Vec<T>, CacheError> {
         let malformed = |what: String| CacheError::Malformed { path: self.path.to_path_buf(), what };
         let wanted = section_name(name);
         let e =
@@ -413,8 +415,16 @@ impl<'a> CacheFile<'a> {
         }
         let bytes = &self.bytes[range];
         // Sections start on 64-byte boundaries of a page-aligned mapping, so the cast succeeds
-        // and `to_vec` copies without first zeroing; the fallback handles any alignment.
+        // and the copy needs no zeroing first; the fallback handles any alignment. Large
+        // sections are copied by all threads: the page faults of the fresh destination are
+        // most of a cached start.
         Ok(match bytemuck::try_cast_slice::<u8, T>(bytes) {
+            Ok(items) if bytes.len() >= PARALLEL_COPY_BYTES => {
+                use rayon::prelude::*;
+                let mut v = Vec::with_capacity(items.len());
+                v.par_extend(items.par_iter().copied());
+                v
+            }
             Ok(items) => items.to_vec(),
             Err(_) => bytemuck::pod_collect_to_vec(bytes),
         })
