@@ -5,7 +5,7 @@
 use crate::bvh::{BuildOptions, BuildQuality, Bvh2, Bvh8Stats, BvhStats};
 use crate::io::LoadError;
 use crate::math::Aabb;
-use crate::scene::{CommitReport, Scene, SceneBuilder};
+use crate::scene::{CommitReport, Scene, SceneBuilder, TrianglesSoa};
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -205,13 +205,7 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, InfoErro
     };
     if opts.against_embree && opts.embree_first {
         let (kept, _) = builder.clone().filter();
-        if !kept.spheres.is_empty() {
-            return Err(InfoError::Embree(format!(
-                "the Embree comparison supports triangle meshes only, but the scene has {} spheres",
-                kept.spheres.len()
-            )));
-        }
-        info.embree_builds = embree_builds(&kept.triangles.positions, &kept.triangles.indices)?;
+        info.embree_builds = embree_builds(&kept.triangles, kept.spheres.len())?;
     }
     let mut builder = Some(builder);
     for (i, &quality) in opts.qualities.iter().enumerate() {
@@ -259,23 +253,22 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, InfoErro
             peak_added_bytes,
         });
         if last && opts.against_embree && !opts.embree_first {
-            if scene.num_spheres() > 0 {
-                return Err(InfoError::Embree(format!(
-                    "the Embree comparison supports triangle meshes only, but the scene has {} spheres",
-                    scene.num_spheres()
-                )));
-            }
-            info.embree_builds = embree_builds(&scene.triangles.positions, &scene.triangles.indices)?;
+            info.embree_builds = embree_builds(&scene.triangles, scene.num_spheres())?;
         }
     }
     info.peak_resident_bytes = peak_resident_bytes();
     Ok(info)
 }
 
-/// Embree MEDIUM and HIGH builds of a triangle mesh on the current rayon pool's thread count.
+/// Embree MEDIUM and HIGH builds of a scene's triangles on the current rayon pool's thread
+/// count; refused when the scene also has `spheres` (the Embree wrapper passes triangles only).
 #[cfg(feature = "embree")]
-fn embree_builds(positions: &[crate::math::Vec3], indices: &[[u32; 3]]) -> Result<Vec<EmbreeBuildInfo>, InfoError> {
-    use crate::embree::{EmbreeOptions, EmbreeQuality, EmbreeScene};
+fn embree_builds(triangles: &TrianglesSoa, spheres: usize) -> Result<Vec<EmbreeBuildInfo>, InfoError> {
+    use crate::embree::{EmbreeError, EmbreeOptions, EmbreeQuality, EmbreeScene};
+    if spheres > 0 {
+        return Err(InfoError::Embree(EmbreeError::Spheres(spheres).to_string()));
+    }
+    let (positions, indices) = (&triangles.positions, &triangles.indices);
     let mut out = Vec::new();
     for quality in [EmbreeQuality::Medium, EmbreeQuality::High] {
         let options = EmbreeOptions { quality, threads: rayon::current_num_threads(), ..EmbreeOptions::default() };
@@ -292,7 +285,7 @@ fn embree_builds(positions: &[crate::math::Vec3], indices: &[[u32; 3]]) -> Resul
 }
 
 #[cfg(not(feature = "embree"))]
-fn embree_builds(_: &[crate::math::Vec3], _: &[[u32; 3]]) -> Result<Vec<EmbreeBuildInfo>, InfoError> {
+fn embree_builds(_: &TrianglesSoa, _: usize) -> Result<Vec<EmbreeBuildInfo>, InfoError> {
     Ok(Vec::new())
 }
 

@@ -221,9 +221,7 @@ impl PrimInfo {
 /// Builds a binary BVH over `prims` (reordered in place). Primitive ids in the leaves refer
 /// to `BuildPrim::id`. An empty input gives a tree with one empty leaf.
 pub fn build_bvh2(prims: &mut [BuildPrim], opts: &BuildOptions) -> Bvh2 {
-    let slots = build_slots(prims, opts, u32::MAX);
-    let nodes = compact(&slots, prims);
-    Bvh2 { nodes, prim_ids: prim_ids(prims) }
+    build_bvh2_kinds(prims, opts, u32::MAX)
 }
 
 /// [`build_bvh2`] for a mix of two primitive kinds: ids below `first_of_second_kind` are
