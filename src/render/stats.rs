@@ -193,12 +193,16 @@ fn bvh8_tests(scene: &Scene, ray: &Ray, any_hit: bool) -> u64 {
             continue;
         }
         let n = &bvh.nodes[node];
-        let mut hits: Vec<(f32, usize)> = (0..8)
-            .filter(|&k| !n.children[k].is_empty())
-            .filter_map(|k| slab_test(&n.child_bounds(k), ray.origin, inv, ray.tnear, tfar).map(|t| (t, k)))
-            .collect();
-        hits.sort_by(|a, b| b.0.total_cmp(&a.0));
-        for (_, k) in hits {
+        // Children hit, far to near, so that the nearest is popped first.
+        let (mut hits, mut count) = ([(0.0f32, 0usize); 8], 0);
+        for k in (0..8).filter(|&k| !n.children[k].is_empty()) {
+            if let Some(t) = slab_test(&n.child_bounds(k), ray.origin, inv, ray.tnear, tfar) {
+                hits[count] = (t, k);
+                count += 1;
+            }
+        }
+        hits[..count].sort_by(|a, b| b.0.total_cmp(&a.0));
+        for &(_, k) in &hits[..count] {
             let c = n.children[k];
             stack.push(if c.is_leaf() { (0, Some(c)) } else { (c.node_index(), None) });
         }
