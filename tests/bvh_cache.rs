@@ -46,6 +46,11 @@ fn commit_and_compare(dir: &Path, opts: &BuildOptions) -> raypack::CacheReport {
         assert_eq!(c.prim_ids, f.prim_ids);
     }
     assert_eq!(cached.bounds(), fresh.bounds());
+    // A loaded BVH8 is read in place from the file's mapping, a built one from memory.
+    let b8 = cached.bvh8();
+    assert_eq!(b8.nodes.is_mapped(), report.loaded);
+    assert_eq!(b8.tris.is_mapped(), report.loaded);
+    assert!(!fresh.bvh8().nodes.is_mapped());
     for r in random_through_bounds(&fresh.bounds(), 2000, 7) {
         let (a, b) = (cached.intersect1(&r), fresh.intersect1(&r));
         assert_eq!(
@@ -56,6 +61,27 @@ fn commit_and_compare(dir: &Path, opts: &BuildOptions) -> raypack::CacheReport {
         assert_eq!(cached.intersect1_reference(&r).t.to_bits(), a.t.to_bits());
     }
     report
+}
+
+#[test]
+fn a_mapped_bvh_is_copied_on_first_write_and_outlives_its_file() {
+    let dir = std::env::temp_dir().join(format!("raypack-cache-cow-{}", std::process::id()));
+    let opts = BuildOptions::default();
+    builder().commit_cached(&opts, &dir);
+    let (scene, _, report) = builder().commit_cached(&opts, &dir);
+    assert!(report.loaded);
+    let mut b8 = scene.bvh8().clone();
+    assert!(b8.nodes.is_mapped(), "a clone shares the mapping");
+    let before = b8.nodes[0];
+    b8.nodes[0].children[0] = raypack::bvh::NodeRef::EMPTY;
+    assert!(!b8.nodes.is_mapped(), "writing made the array owned");
+    assert!(scene.bvh8().nodes.is_mapped() && scene.bvh8().nodes[0] == before, "the scene's array is untouched");
+    // Deleting the file leaves the mapping (and the scene) intact.
+    std::fs::remove_dir_all(&dir).unwrap();
+    let (fresh, _) = builder().commit(&opts);
+    for r in random_through_bounds(&fresh.bounds(), 500, 3) {
+        assert_eq!(scene.intersect1(&r).t.to_bits(), fresh.intersect1(&r).t.to_bits());
+    }
 }
 
 #[test]

@@ -1,5 +1,6 @@
 //! The 8-wide BVH: nodes, triangle blocks and sphere blocks in flat arrays.
 
+use crate::bvh::BvhArray;
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
 use crate::geometry::{Sphere4, Tri8, TriBlock, TriangleTest};
 
@@ -26,13 +27,13 @@ pub type DefaultTriBlock = Tri8;
 /// An 8-wide BVH with leaf blocks of `T`. `nodes[0]` is the root (always an inner node; an
 /// empty tree is a root with eight empty slots).
 #[derive(Clone, Debug)]
-pub struct Bvh8<T = DefaultTriBlock> {
+pub struct Bvh8<T: TriBlock = DefaultTriBlock> {
     /// Inner nodes; children of a node that are inner nodes are stored consecutively.
-    pub nodes: Vec<Bvh8Node>,
+    pub nodes: BvhArray<Bvh8Node>,
     /// Triangle blocks; a leaf's blocks are consecutive.
-    pub tris: Vec<T>,
+    pub tris: BvhArray<T>,
     /// Sphere blocks.
-    pub spheres: Vec<Sphere4>,
+    pub spheres: BvhArray<Sphere4>,
     /// The triangle test the blocks are laid out for (the kernels dispatch on it once per
     /// query).
     pub test: TriangleTest,
@@ -40,7 +41,12 @@ pub struct Bvh8<T = DefaultTriBlock> {
 
 impl<T: TriBlock> Default for Bvh8<T> {
     fn default() -> Self {
-        Self { nodes: vec![Bvh8Node::EMPTY], tris: Vec::new(), spheres: Vec::new(), test: TriangleTest::default() }
+        Self {
+            nodes: vec![Bvh8Node::EMPTY].into(),
+            tris: BvhArray::default(),
+            spheres: BvhArray::default(),
+            test: TriangleTest::default(),
+        }
     }
 }
 
@@ -113,9 +119,9 @@ impl<T: TriBlock> Bvh8<T> {
 
     /// Bytes of nodes and leaf blocks.
     pub fn bytes(&self) -> usize {
-        std::mem::size_of_val(self.nodes.as_slice())
-            + std::mem::size_of_val(self.tris.as_slice())
-            + std::mem::size_of_val(self.spheres.as_slice())
+        std::mem::size_of_val(&self.nodes[..])
+            + std::mem::size_of_val(&self.tris[..])
+            + std::mem::size_of_val(&self.spheres[..])
     }
 
     /// Structure statistics.

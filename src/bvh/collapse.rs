@@ -285,7 +285,20 @@ trait Sink<T> {
     fn push_sphere(&mut self, b: Sphere4) -> usize;
 }
 
-impl<T> Sink<T> for Bvh8<T> {
+/// The arrays of a BVH8 being written (a [`Bvh8`]'s are read-only once made).
+struct Arrays<T> {
+    nodes: Vec<Bvh8Node>,
+    tris: Vec<T>,
+    spheres: Vec<Sphere4>,
+}
+
+impl<T: TriBlock> Arrays<T> {
+    fn into_bvh8(self, test: TriangleTest) -> Bvh8<T> {
+        Bvh8 { nodes: self.nodes.into(), tris: self.tris.into(), spheres: self.spheres.into(), test }
+    }
+}
+
+impl<T> Sink<T> for Arrays<T> {
     fn alloc_nodes(&mut self, k: usize) -> usize {
         let i = self.nodes.len();
         self.nodes.resize(i + k, Bvh8Node::EMPTY);
@@ -543,9 +556,9 @@ pub fn collapse_for<T: TriBlock>(
     // Allocated and first written in parallel, as are the output arrays below: for large
     // meshes the page faults of fresh memory are a large part of the cost.
     let p = Planned { bvh2: &bvh2, first_sphere, plans: (0..m).into_par_iter().map(|_| AtomicU64::new(0)).collect() };
-    let mut out = Bvh8 { nodes: vec![Bvh8Node::EMPTY], tris: Vec::new(), spheres: Vec::new(), test };
+    let mut out = Arrays { nodes: vec![Bvh8Node::EMPTY], tris: Vec::new(), spheres: Vec::new() };
     if bvh2.is_empty() {
-        return out;
+        return out.into_bvh8(test);
     }
     plan_rec(&p, opts, T::M as u32, 0, 0);
     let cut = (p.count(0) / PARALLEL_EMIT_DIVISOR).max(1);
@@ -553,7 +566,7 @@ pub fn collapse_for<T: TriBlock>(
     if bvh2.nodes[0].is_leaf() || em.is_leaf_root(0) {
         let r = em.leaf(0, &mut out);
         out.nodes[0].set_child(0, &bvh2.nodes[0].bounds, r);
-        return out;
+        return out.into_bvh8(test);
     }
     out.nodes[0] = em.fill(0, &mut out);
     let deferred = em.defer.take().map(|d| d.1).unwrap_or_default();
@@ -599,5 +612,5 @@ pub fn collapse_for<T: TriBlock>(
     for (root, &(at, _)) in roots.into_iter().zip(&deferred) {
         out.nodes[at] = root;
     }
-    out
+    out.into_bvh8(test)
 }

@@ -7,6 +7,7 @@
 //!   SIMD kernels of [`traverse1`] (single rays) and [`traverse_packet`] (8/16-ray packets,
 //!   tiles of camera rays) traverse.
 
+pub mod array;
 pub mod build_sah;
 pub mod bvh2;
 pub mod bvh8;
@@ -18,6 +19,7 @@ pub mod traverse1;
 pub mod traverse_packet;
 pub mod validate;
 
+pub use array::BvhArray;
 pub use build_sah::{BuildOptions, BuildPrim, BuildQuality, SplitMethod, build_bvh2, build_bvh2_kinds};
 pub use bvh2::{Bvh2, Bvh2Node};
 pub use bvh8::{Bvh8, Bvh8Stats, DefaultTriBlock};

@@ -107,7 +107,7 @@ fn redo_t_f64<V: Lanes>(t: V, lanes: u32, e2: &Vec3x<V>, q: &Vec3x<V>, inv_det: 
 }
 
 /// A block of M triangles in structure-of-arrays form. Implemented by [`Tri4`] and [`Tri8`].
-pub trait TriBlock: Copy + Send + Sync + std::fmt::Debug + 'static {
+pub trait TriBlock: bytemuck::Pod + Send + Sync + std::fmt::Debug + 'static {
     /// Lane vector of width M.
     type V: Lanes;
     /// Triangles per block.

@@ -6,10 +6,10 @@
 //! indices, sphere centres and radii, after [`SceneBuilder::commit`]'s filtering), of the
 //! [`BuildOptions`], of the leaf block type and of [`FORMAT_VERSION`]. A file is trusted only
 //! when its magic, version and key match, its length is the one its header records and the
-//! XXH3-64 checksum of all its other bytes agrees; its arrays are then copied out of the
-//! mapping and checked for the ranges the traversal kernels index with (child and block
-//! indices, depth, primitive ids, empty slots), so that even a forged file cannot make a
-//! query panic. Anything else is reported in [`CacheReport::rejected`], rebuilt and
+//! XXH3-64 checksum of all its other bytes agrees; the BVH8's arrays are then used in place
+//! in the mapping ([`crate::bvh::BvhArray`]; the binary BVH, when kept, is copied out) and
+//! checked for the ranges the traversal kernels index with (child and block indices, depth,
+//! primitive ids, empty slots), so that even a forged file cannot make a query panic. Anything else is reported in [`CacheReport::rejected`], rebuilt and
 //! overwritten. Files are written atomically (a temporary file renamed over the old one).
 //!
 //! Layout (little-endian, as the machine writes it):
@@ -24,13 +24,15 @@
 //! watertight triangle blocks) is one more `Pod` array: a name, a `SectionWriter::push` in
 //! `store` and a `CacheFile::section` call in `read_accel`.
 
-use crate::bvh::{BuildOptions, Bvh2, Bvh2Node, Bvh8, Bvh8Node, DefaultTriBlock, LeafKind, MAX_DEPTH};
+use crate::bvh::{BuildOptions, Bvh2, Bvh2Node, Bvh8, Bvh8Node, BvhArray, DefaultTriBlock, LeafKind, MAX_DEPTH};
 use crate::geometry::TriangleTest;
 use crate::geometry::{Sphere4, Tri8, TriBlock};
 use crate::math::Aabb;
 use crate::scene::{CommitReport, Scene, SceneBuilder};
+use memmap2::Mmap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use xxhash_rust::xxh3::Xxh3;
 
@@ -347,6 +349,8 @@ pub(crate) struct CacheFile<'a> {
     path: &'a Path,
     bytes: &'a [u8],
     entries: Vec<SectionEntry>,
+    /// The mapping `bytes` is, when sections may be used in place.
+    map: Option<Arc<Mmap>>,
 }
 
 impl<'a> CacheFile<'a> {
@@ -390,11 +394,30 @@ impl<'a> CacheFile<'a> {
             what: format!("{} sections do not fit", header.sections),
         })?;
         let entries = table.chunks_exact(32).map(bytemuck::pod_read_unaligned).collect();
-        Ok(Self { path, bytes, entries })
+        Ok(Self { path, bytes, entries, map: None })
     }
 
-    /// Copies out section `name`, checking its element size and extent.
-    pub(crate) fn section<T: bytemuck::Pod + Send + Sync>(&self, name: &str) -> Result<Vec<T>, CacheError> {
+    /// [`CacheFile::check`] of a whole mapped file, whose sections
+    /// [`CacheFile::section_in_place`] can then use where they lie.
+    fn check_mapped(path: &'a Path, map: &'a Arc<Mmap>, key: CacheKey) -> Result<Self, CacheError> {
+        Ok(Self { map: Some(map.clone()), ..Self::check(path, map, key)? })
+    }
+
+    /// Section `name` used in place in the mapping (copied when the file is not mapped or
+    /// the section is misaligned for `T`), checking its element size and extent.
+    pub(crate) fn section_in_place<T: bytemuck::Pod + Send + Sync>(
+        &self,
+        name: &str,
+    ) -> Result<BvhArray<T>, CacheError> {
+        let range = self.section_range::<T>(name)?;
+        match self.map.as_ref().and_then(|m| BvhArray::mapped(m.clone(), range)) {
+            Some(a) => Ok(a),
+            None => self.section(name).map(BvhArray::from),
+        }
+    }
+
+    /// The byte range of section `name`, checking its element size and extent.
+    fn section_range<T>(&self, name: &str) -> Result<std::ops::Range<usize>, CacheError> {
         let malformed = |what: String| CacheError::Malformed { path: self.path.to_path_buf(), what };
         let wanted = section_name(name);
         let e =
@@ -403,14 +426,18 @@ impl<'a> CacheFile<'a> {
         if e.elem_size as usize != size {
             return Err(malformed(format!("section {name} has {}-byte elements, expected {size}", e.elem_size)));
         }
-        let range = e
-            .count
+        e.count
             .checked_mul(size as u64)
             .and_then(|n| n.checked_add(e.offset))
             .filter(|&end| end <= self.bytes.len() as u64)
             .map(|end| e.offset as usize..end as usize)
-            .ok_or_else(|| malformed(format!("section {name} runs past the end of the file")))?;
-        if size == 0 {
+            .ok_or_else(|| malformed(format!("section {name} runs past the end of the file")))
+    }
+
+    /// Copies out section `name`, checking its element size and extent.
+    pub(crate) fn section<T: bytemuck::Pod + Send + Sync>(&self, name: &str) -> Result<Vec<T>, CacheError> {
+        let range = self.section_range::<T>(name)?;
+        if std::mem::size_of::<T>() == 0 {
             return Ok(Vec::new());
         }
         let bytes = &self.bytes[range];
@@ -443,14 +470,16 @@ fn load(path: &Path, key: CacheKey, num_prims: usize) -> Result<Option<Accel>, C
         let bytes = std::fs::read(path).map_err(io(path))?;
         return CacheFile::check(path, &bytes, key).map(|_| None);
     }
-    // SAFETY: the mapping is read-only and lives only inside this function; everything used
-    // afterwards is copied out of it. raypack never modifies a cache file in place (it
-    // renames a new file over it, which leaves this mapping's inode intact). Another process
-    // truncating the file while it is mapped could raise SIGBUS, the accepted risk of every
-    // memory-mapped reader; bytes changed under us are caught by the checksum or the checks.
-    // `populate` reads the whole file ahead (MAP_POPULATE) instead of faulting page by page.
-    let map = unsafe { memmap2::MmapOptions::new().populate().map(&file) }.map_err(io(path))?;
-    let file = CacheFile::check(path, &map, key)?;
+    // SAFETY: the mapping is read-only, and the BVH8's arrays read it in place for as long
+    // as the scene lives. raypack never modifies a cache file in place (it renames a new file
+    // over it, which leaves this mapping's inode intact). Another process truncating the file
+    // while it is mapped could raise SIGBUS, the accepted risk of every memory-mapped reader;
+    // bytes changed under us after the checks below cannot cause undefined behaviour (the
+    // arrays are plain `Pod` data and every kernel index is bounds-checked), only wrong hits
+    // or a panic. `populate` reads the whole file ahead (MAP_POPULATE) instead of faulting
+    // page by page.
+    let map = Arc::new(unsafe { memmap2::MmapOptions::new().populate().map(&file) }.map_err(io(path))?);
+    let file = CacheFile::check_mapped(path, &map, key)?;
     let accel = read_accel(&file)?;
     check_accel(&accel, num_prims).map_err(|what| CacheError::Malformed { path: path.to_path_buf(), what })?;
     Ok(Some(accel))
@@ -467,9 +496,9 @@ fn read_accel(f: &CacheFile) -> Result<Accel, CacheError> {
         bvh2: Some(Bvh2 { nodes: f.section::<Bvh2Node>("bvh2.nodes")?, prim_ids: f.section("bvh2.prims")? })
             .filter(|b| !b.nodes.is_empty()),
         bvh8: Bvh8 {
-            nodes: f.section::<Bvh8Node>("bvh8.nodes")?,
-            tris: f.section::<DefaultTriBlock>("bvh8.tris")?,
-            spheres: f.section::<Sphere4>("bvh8.spheres")?,
+            nodes: f.section_in_place::<Bvh8Node>("bvh8.nodes")?,
+            tris: f.section_in_place::<DefaultTriBlock>("bvh8.tris")?,
+            spheres: f.section_in_place::<Sphere4>("bvh8.spheres")?,
             // Set from the options by the caller (the key covers them).
             test: TriangleTest::default(),
         },
@@ -643,7 +672,7 @@ mod tests {
                 .expect("a node with an empty slot");
             s.bvh8.nodes[i].set_child(k, &Aabb::from_point(crate::Vec3::ZERO), NodeRef::EMPTY);
         });
-        forge("4", &|s| s.bvh8.tris.clear());
+        forge("4", &|s| s.bvh8.tris.to_mut().clear());
         forge("5", &|s| s.bvh8.tris[0].prim[0] = 1 << 20);
         forge("6", &|s| s.bvh2.as_mut().unwrap().nodes[0].start = 1 << 30);
         forge("7", &|s| s.bvh2.as_mut().unwrap().prim_ids[0] = 1 << 20);
