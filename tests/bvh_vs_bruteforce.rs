@@ -5,7 +5,7 @@ mod common;
 use common::{random_rays, scene_of};
 use raypack::bvh::validate::validate_bvh2;
 use raypack::generate::{grid, random_soup, uv_sphere};
-use raypack::{BuildOptions, Hit, Ray, Scene, SplitMethod, Vec3};
+use raypack::{BuildOptions, BuildQuality, Hit, Ray, Scene, SplitMethod, Vec3};
 
 /// Compares the reference BVH with brute force on `rays`; returns the number compared.
 fn check(scene: &Scene, rays: &[Ray], what: &str) -> usize {
@@ -51,13 +51,38 @@ fn check(scene: &Scene, rays: &[Ray], what: &str) -> usize {
 #[test]
 fn random_soups_over_leaf_sizes() {
     let mut total = 0;
-    for (seed, leaf) in [(1u64, 1usize), (2, 4), (3, 8)] {
-        let soup = random_soup(3000, 0.08, seed);
-        let opts = BuildOptions { max_leaf_size: leaf, ..BuildOptions::default() };
-        let scene = scene_of(&[&soup], &[], &opts);
-        total += check(&scene, &random_rays(&scene, 40_000, seed), &format!("soup leaf {leaf}"));
+    // Medium makes every node of at most `leaf` primitives a leaf; High also splits those
+    // by the SAH.
+    for quality in [BuildQuality::Medium, BuildQuality::High] {
+        for (seed, leaf) in [(1u64, 1usize), (2, 4), (3, 8)] {
+            let soup = random_soup(3000, 0.08, seed);
+            let opts = BuildOptions { max_leaf_size: leaf, quality, ..BuildOptions::default() };
+            let scene = scene_of(&[&soup], &[], &opts);
+            total += check(&scene, &random_rays(&scene, 40_000, seed), &format!("soup leaf {leaf} {quality:?}"));
+        }
     }
-    assert!(total >= 100_000);
+    assert!(total >= 200_000);
+}
+
+#[test]
+fn small_nodes_are_leaves_below_high_quality() {
+    // Four triangles far apart: the SAH splits them (High), Medium keeps them in one leaf
+    // because they fit `max_leaf_size`, and both trees trace alike.
+    let mut b = raypack::SceneBuilder::new();
+    let m = b.add_material(raypack::Material::default());
+    let tri = [Vec3::ZERO, Vec3::X * 4.0, Vec3::Y * 4.0];
+    for i in 0..4 {
+        let o = Vec3::new(10.0 * i as f32, 0.0, 0.0);
+        b.add_mesh(&tri.map(|p| p + o), &[[0, 1, 2]], m).unwrap();
+    }
+    let leaves = |quality| {
+        let opts = BuildOptions { max_leaf_size: 4, quality, keep_bvh2: true, ..BuildOptions::default() };
+        let scene = b.clone().commit(&opts).0;
+        check(&scene, &random_rays(&scene, 2000, 5), &format!("{quality:?}"));
+        scene.bvh2().unwrap().nodes.iter().filter(|n| n.is_leaf()).count()
+    };
+    assert_eq!(leaves(BuildQuality::Medium), 1);
+    assert_eq!(leaves(BuildQuality::High), 4);
 }
 
 #[test]

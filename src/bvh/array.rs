@@ -12,6 +12,11 @@ use std::sync::Arc;
 /// dragon's 59 MB BVH8 out of the mapping into fresh memory took 25–36 ms of a 60 ms start
 /// on this machine (page faults of the new memory, mostly), against nothing for pages the
 /// file's mapping already shares with the page cache.
+///
+/// The builder's large arrays are anonymous mappings ([`BvhArray::zeroed`]): zero pages that
+/// the kernel provides on first touch, so the parallel tasks that fill them pay the page
+/// faults in parallel, and nothing writes them twice (a `Vec` of 64-byte-aligned blocks is
+/// zeroed by one thread with `memset`).
 pub struct BvhArray<T> {
     repr: Repr<T>,
 }
@@ -24,6 +29,11 @@ enum Repr<T> {
         map: Arc<memmap2::Mmap>,
         range: Range<usize>,
     },
+    /// The first `len` elements of an anonymous mapping (page-aligned, so aligned for `T`).
+    Anon {
+        map: memmap2::MmapMut,
+        len: usize,
+    },
 }
 
 impl<T: bytemuck::Pod> BvhArray<T> {
@@ -34,14 +44,23 @@ impl<T: bytemuck::Pod> BvhArray<T> {
         Some(Self { repr: Repr::Mapped { map, range } })
     }
 
-    /// The elements as a `Vec`, copying them out of the mapping first if they are mapped.
+    /// `len` zeroed elements in fresh memory that is not touched until written.
+    pub(crate) fn zeroed(len: usize) -> Self {
+        let bytes = len.checked_mul(std::mem::size_of::<T>()).expect("array size overflows");
+        match memmap2::MmapMut::map_anon(bytes) {
+            Ok(map) if bytes > 0 => Self { repr: Repr::Anon { map, len } },
+            _ => bytemuck::zeroed_vec(len).into(),
+        }
+    }
+
+    /// The elements as a `Vec`, copying them first if they are not in one.
     pub fn to_mut(&mut self) -> &mut Vec<T> {
-        if let Repr::Mapped { .. } = self.repr {
+        if !matches!(self.repr, Repr::Owned(_)) {
             self.repr = Repr::Owned(self.deref().to_vec());
         }
         match &mut self.repr {
             Repr::Owned(v) => v,
-            Repr::Mapped { .. } => unreachable!("made owned above"),
+            _ => unreachable!("made owned above"),
         }
     }
 
@@ -65,13 +84,20 @@ impl<T: bytemuck::Pod> Deref for BvhArray<T> {
             Repr::Owned(v) => v,
             // Cannot fail: `mapped` checked the range, size and alignment.
             Repr::Mapped { map, range } => bytemuck::cast_slice(&map[range.clone()]),
+            Repr::Anon { map, len } => bytemuck::cast_slice(&map[..len * std::mem::size_of::<T>()]),
         }
     }
 }
 
 impl<T: bytemuck::Pod> DerefMut for BvhArray<T> {
     fn deref_mut(&mut self) -> &mut [T] {
-        self.to_mut()
+        if !matches!(self.repr, Repr::Anon { .. }) {
+            return self.to_mut();
+        }
+        match &mut self.repr {
+            Repr::Anon { map, len } => bytemuck::cast_slice_mut(&mut map[..*len * std::mem::size_of::<T>()]),
+            _ => unreachable!("checked above"),
+        }
     }
 }
 
@@ -96,11 +122,12 @@ impl<T> Default for BvhArray<T> {
     }
 }
 
-impl<T: Clone> Clone for BvhArray<T> {
+impl<T: bytemuck::Pod> Clone for BvhArray<T> {
     fn clone(&self) -> Self {
         let repr = match &self.repr {
             Repr::Owned(v) => Repr::Owned(v.clone()),
             Repr::Mapped { map, range } => Repr::Mapped { map: map.clone(), range: range.clone() },
+            Repr::Anon { .. } => Repr::Owned(self.to_vec()),
         };
         Self { repr }
     }
@@ -135,5 +162,15 @@ mod tests {
         a[1] = 5;
         assert!(!a.is_mapped() && a[..] == [1, 5]);
         assert_eq!(a.into_vec(), vec![1, 5]);
+    }
+
+    #[test]
+    fn zeroed_arrays_are_written_in_place() {
+        let mut a = BvhArray::<[u64; 8]>::zeroed(1000);
+        assert!(a.len() == 1000 && a.iter().all(|x| *x == [0; 8]));
+        a[999][7] = 3;
+        assert!(!a.is_mapped() && a[999][7] == 3);
+        assert_eq!(a.clone()[999][7], 3);
+        assert!(BvhArray::<u32>::zeroed(0).is_empty());
     }
 }

@@ -18,6 +18,13 @@ use crate::bvh::{Bvh2, Bvh2Node, MAX_DEPTH};
 use crate::math::{Aabb, Vec3, Vec4};
 
 /// How much effort the builder spends on tree quality.
+///
+/// Below `High`, every node of at most [`BuildOptions::max_leaf_size`] primitives is a leaf;
+/// `High` also weighs splitting those by the SAH. The binary tree is an intermediate for the
+/// 8-wide one, whose leaf blocks hold 8 triangles, so splitting such small nodes rarely
+/// pays: on the Stanford dragon it moved the BVH8's SAH cost from 15.04 to 15.03 (2% more
+/// blocks) for a fifth of the binary build's time (its nodes of at most 4 primitives are
+/// more than half of all nodes, and each costs a full binning and sweep).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum BuildQuality {
     /// Fewer bins; for interactive use.
@@ -25,7 +32,7 @@ pub enum BuildQuality {
     /// The default trade-off.
     #[default]
     Medium,
-    /// More bins; for final renders of large scenes.
+    /// More bins, and small nodes split by the SAH; for final renders of large scenes.
     High,
 }
 
@@ -42,7 +49,8 @@ pub enum SplitMethod {
 /// Parameters of the BVH build.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BuildOptions {
-    /// Most primitives in a leaf (at least 1). Larger nodes are always split.
+    /// Most primitives in a leaf (at least 1). Larger nodes are always split; smaller ones
+    /// are leaves below [`BuildQuality::High`].
     pub max_leaf_size: usize,
     /// SAH bins per axis (clamped to `16 ..= 256`); `None` picks from `quality`.
     pub bins: Option<usize>,
@@ -229,8 +237,8 @@ pub fn build_bvh2(prims: &mut [BuildPrim], opts: &BuildOptions) -> Bvh2 {
 /// leaf that would is split into one leaf per kind under an inner node, so that leaf blocks,
 /// which hold one kind, can be filled straight from the binary leaves.
 pub fn build_bvh2_kinds(prims: &mut [BuildPrim], opts: &BuildOptions, first_of_second_kind: u32) -> Bvh2 {
-    let slots = build_slots(prims, opts, first_of_second_kind);
-    let nodes = compact(&slots, prims);
+    let (slots, leaves) = build_slots(prims, opts, first_of_second_kind);
+    let nodes = compact(&slots, leaves, prims);
     Bvh2 { nodes, prim_ids: prim_ids(prims) }
 }
 
@@ -241,9 +249,11 @@ fn prim_ids(prims: &[BuildPrim]) -> Vec<u32> {
     prims.par_iter().map(|p| p.id()).collect()
 }
 
-/// A node in the reserved-range build array: a leaf's first primitive and count (> 0), or
-/// an inner node's right child slot and 0 (its left child is the next slot). Boxes are not
-/// stored: [`compact`] recomputes them from the primitives, which keeps the array, two
+/// A node in the reserved-range build array: a leaf's first primitive and count (`1 ..
+/// INNER`), or an inner node's right child slot and `INNER |` the number of leaves below
+/// its left child (its left child is the next slot), which tells [`compact`] where the
+/// right subtree's nodes start so that it can renumber both subtrees in parallel. Boxes are
+/// not stored: [`compact`] recomputes them from the primitives, which keeps the array, two
 /// slots per primitive, at 8 bytes a slot (with boxes it was 32, and the largest
 /// allocation of the build: 56 MB of its 118 MB peak on the Stanford dragon).
 #[repr(C)]
@@ -253,21 +263,26 @@ struct Slot {
     count: u32,
 }
 
+/// The flag of an inner [`Slot`]'s `count`.
+const INNER: u32 = 1 << 31;
+
 /// The binned SAH build into the reserved-range slots that [`compact`] renumbers.
-fn build_slots(prims: &mut [BuildPrim], opts: &BuildOptions, first_of_second_kind: u32) -> Vec<Slot> {
+/// Returns the slots and the number of leaves.
+fn build_slots(prims: &mut [BuildPrim], opts: &BuildOptions, first_of_second_kind: u32) -> (Vec<Slot>, usize) {
     let n = prims.len();
     if n == 0 {
-        return Vec::new();
+        return (Vec::new(), 0);
     }
-    // Reserved-range slots (see the module docs): leaves hold `start, count > 0`, inner
-    // nodes `start` = their right child's slot (the left child is the next slot) and
-    // `count` = 0. Zero-filled memory costs nothing until touched, and only used slots are
-    // ever read.
+    // Reserved-range slots (see the module docs and `Slot`). Zero-filled memory costs
+    // nothing until touched, and only used slots are ever read.
     let mut slots: Vec<Slot> = bytemuck::zeroed_vec(2 * n - 1);
-    let ctx = Ctx { opts, bins: opts.bin_count(), max_leaf: opts.max_leaf_size.max(1), first_of_second_kind };
+    let max_leaf = opts.max_leaf_size.clamp(1, INNER as usize - 1);
+    // See `BuildQuality`: below High, every node of at most `max_leaf` primitives is a leaf.
+    let leaf_at_most = if opts.quality == BuildQuality::High { 1 } else { max_leaf };
+    let ctx = Ctx { opts, bins: opts.bin_count(), max_leaf, leaf_at_most, first_of_second_kind };
     let info = PrimInfo::of_par(prims);
-    build_rec(&ctx, prims, 0, &mut slots, 0, info, 0, &mut Scratch::new());
-    slots
+    let leaves = build_rec(&ctx, prims, 0, &mut slots, 0, info, 0, &mut Scratch::new());
+    (slots, leaves)
 }
 
 struct Ctx<'a> {
@@ -275,11 +290,13 @@ struct Ctx<'a> {
     bins: usize,
     max_leaf: usize,
     first_of_second_kind: u32,
+    /// Nodes of at most this many primitives become leaves without weighing a split.
+    leaf_at_most: usize,
 }
 
 /// Builds the subtree over `prims` (which start at `first` in the global array, and whose
 /// bounds are `info`) into `slots`, whose slot 0 is the subtree root and whose global index
-/// is `base`.
+/// is `base`; returns the number of leaves.
 #[allow(clippy::too_many_arguments)]
 fn build_rec(
     ctx: &Ctx,
@@ -290,10 +307,10 @@ fn build_rec(
     info: PrimInfo,
     depth: usize,
     scratch: &mut Scratch,
-) {
+) -> usize {
     let n = prims.len();
     debug_assert_eq!(slots.len(), 2 * n - 1);
-    let split = if n == 1 { None } else { choose_split(ctx, prims, &info, depth, scratch) };
+    let split = if n <= ctx.leaf_at_most { None } else { choose_split(ctx, prims, &info, depth, scratch) };
     let Some((mid, li, ri)) = split else {
         return make_leaf(ctx, prims, first, slots, base);
     };
@@ -304,32 +321,37 @@ fn build_rec(
     let (ls, rs) = rest.split_at_mut(2 * nl - 1);
     let left = base + 1;
     let right = base + 2 * nl as u32;
-    if n > PARALLEL_SUBTREE_THRESHOLD {
+    let (ll, rl) = if n > PARALLEL_SUBTREE_THRESHOLD {
         rayon::join(
             || build_rec(ctx, lp, first, ls, left, li, depth + 1, scratch),
             || build_rec(ctx, rp, first + nl, rs, right, ri, depth + 1, &mut Scratch::new()),
-        );
+        )
     } else {
-        build_rec(ctx, lp, first, ls, left, li, depth + 1, scratch);
-        build_rec(ctx, rp, first + nl, rs, right, ri, depth + 1, scratch);
-    }
-    slots[0] = Slot { a: right, count: 0 };
+        (
+            build_rec(ctx, lp, first, ls, left, li, depth + 1, scratch),
+            build_rec(ctx, rp, first + nl, rs, right, ri, depth + 1, scratch),
+        )
+    };
+    slots[0] = Slot { a: right, count: INNER | ll as u32 };
+    ll + rl
 }
 
 /// Writes a leaf over `prims`, or, when they mix the two kinds, an inner node over one
-/// leaf per kind (a subtree of `n >= 2` primitives has the 3 slots this needs).
-fn make_leaf(ctx: &Ctx, prims: &mut [BuildPrim], first: usize, slots: &mut [Slot], base: u32) {
+/// leaf per kind (a subtree of `n >= 2` primitives has the 3 slots this needs); returns the
+/// number of leaves.
+fn make_leaf(ctx: &Ctx, prims: &mut [BuildPrim], first: usize, slots: &mut [Slot], base: u32) -> usize {
     let n = prims.len();
     let k = ctx.first_of_second_kind;
     let nl = partition(prims, |p| p.id() < k);
     if nl == 0 || nl == n {
         slots[0] = Slot { a: first as u32, count: n as u32 };
-        return;
+        return 1;
     }
     let right = 2 * nl;
-    slots[0] = Slot { a: base + right as u32, count: 0 };
+    slots[0] = Slot { a: base + right as u32, count: INNER | 1 };
     slots[1] = Slot { a: first as u32, count: nl as u32 };
     slots[right] = Slot { a: (first + nl) as u32, count: (n - nl) as u32 };
+    2
 }
 
 /// Chooses where to split `prims` and partitions them; returns the size of the left part
@@ -568,47 +590,60 @@ pub fn pad_outward(b: &Aabb) -> Aabb {
 
 /// Renumbers the reserved-range slots depth first so that siblings are adjacent (see
 /// [`Slot`]), computing every box from the primitives (`prims`, in their final order) and
-/// padding it with [`pad_outward`].
-fn compact(slots: &[Slot], prims: &[BuildPrim]) -> Vec<Bvh2Node> {
+/// padding it with [`pad_outward`]. Large subtrees are renumbered in parallel: an inner
+/// slot's left leaf count says where its right subtree's nodes start.
+fn compact(slots: &[Slot], leaves: usize, prims: &[BuildPrim]) -> Vec<Bvh2Node> {
     if slots.is_empty() {
         // The empty tree: one leaf with `count == 0` and empty bounds.
         return vec![Bvh2Node { bounds: Aabb::EMPTY, start: 0, count: 0 }];
     }
     use rayon::prelude::*;
-    // A binary tree has one inner node fewer than leaves, and only leaves have a count.
-    let leaves = slots.par_iter().filter(|s| s.count > 0).count();
     // Written in parallel first: on a 20M-triangle mesh the page faults of the 700 MB array
-    // are a second or more, which the serial renumbering below would pay alone.
+    // are a second or more. A binary tree has one inner node fewer than leaves.
     let mut nodes: Vec<Bvh2Node> = Vec::with_capacity(2 * leaves - 1);
     nodes.par_extend(rayon::iter::repeat_n(Bvh2Node { bounds: Aabb::EMPTY, start: 0, count: 0 }, 2 * leaves - 1));
-    let mut next = 1;
-    compact_rec(slots, prims, 0, 0, &mut nodes, &mut next);
-    debug_assert_eq!(next, nodes.len());
+    let (root, rest) = nodes.split_first_mut().expect("a root");
+    let (node, _, used) = compact_rec(slots, prims, 0, rest, 1);
+    debug_assert_eq!(used, rest.len());
+    *root = node;
     nodes
 }
 
-/// Writes slot `s` as node `f` and its subtree after it (children from `*next` on);
-/// returns the subtree's exact box.
+/// Subtrees of more slots than this are renumbered in parallel.
+const PARALLEL_COMPACT_SLOTS: usize = 1 << 13;
+
+/// Renumbers the subtree at slot `s`: returns its root node (which the caller stores), its
+/// exact box and the number of nodes below the root, written to the front of `out`, whose
+/// first node has global index `at` (children pairs first, then the left subtree's, then
+/// the right's).
 fn compact_rec(
     slots: &[Slot],
     prims: &[BuildPrim],
     s: usize,
-    f: usize,
-    nodes: &mut [Bvh2Node],
-    next: &mut usize,
-) -> Box4 {
+    out: &mut [Bvh2Node],
+    at: usize,
+) -> (Bvh2Node, Box4, usize) {
     let slot = slots[s];
-    if slot.count > 0 {
+    if slot.count & INNER == 0 {
         let (a, n) = (slot.a as usize, slot.count as usize);
         let b = prims[a..a + n].iter().fold(Box4::EMPTY, |b, p| b.union(&Box4 { lower: p.lower, upper: p.upper }));
-        nodes[f] = Bvh2Node { bounds: pad_outward(&b.aabb()), start: slot.a, count: slot.count };
-        return b;
+        return (Bvh2Node { bounds: pad_outward(&b.aabb()), start: slot.a, count: slot.count }, b, 0);
     }
-    let c = *next;
-    *next += 2;
-    let lb = compact_rec(slots, prims, s + 1, c, nodes, next);
-    let rb = compact_rec(slots, prims, slot.a as usize, c + 1, nodes, next);
+    let right = slot.a as usize;
+    let (pair, rest) = out.split_at_mut(2);
+    // The left subtree has 2 * left_leaves - 1 nodes, its root in `pair`.
+    let left_below = 2 * (slot.count & !INNER) as usize - 2;
+    let (lo, ro) = rest.split_at_mut(left_below);
+    let ((ln, lb, lu), (rn, rb, ru)) = if right - s > PARALLEL_COMPACT_SLOTS {
+        rayon::join(
+            || compact_rec(slots, prims, s + 1, lo, at + 2),
+            || compact_rec(slots, prims, right, ro, at + 2 + left_below),
+        )
+    } else {
+        (compact_rec(slots, prims, s + 1, lo, at + 2), compact_rec(slots, prims, right, ro, at + 2 + left_below))
+    };
+    debug_assert_eq!(lu, left_below);
+    (pair[0], pair[1]) = (ln, rn);
     let b = lb.union(&rb);
-    nodes[f] = Bvh2Node { bounds: pad_outward(&b.aabb()), start: c as u32, count: 0 };
-    b
+    (Bvh2Node { bounds: pad_outward(&b.aabb()), start: at as u32, count: 0 }, b, 2 + lu + ru)
 }

@@ -24,7 +24,7 @@
 
 use crate::bvh::build_sah::pad_outward;
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
-use crate::bvh::{Bvh2, Bvh2Node, Bvh8};
+use crate::bvh::{Bvh2, Bvh2Node, Bvh8, BvhArray};
 use crate::geometry::{Sphere4, TriBlock, TriangleTest};
 use crate::math::{Aabb, Vec3};
 use std::borrow::Cow;
@@ -474,7 +474,11 @@ fn pure_leaves<'a>(bvh2: &'a Bvh2, first_sphere: u32, shape: &dyn Fn(u32) -> Pri
         let ids = || bvh2.prim_ids[n.start as usize..(n.start + n.count) as usize].iter();
         n.is_leaf() && ids().any(|&id| id < first_sphere) && ids().any(|&id| id >= first_sphere)
     };
-    if bvh2.is_empty() || !bvh2.nodes.iter().any(mixed) {
+    use rayon::prelude::*;
+    // Most scenes hold one kind only: the ids say so faster than the nodes.
+    let ids = &bvh2.prim_ids;
+    let both_kinds = ids.par_iter().any(|&id| id < first_sphere) && ids.par_iter().any(|&id| id >= first_sphere);
+    if bvh2.is_empty() || !both_kinds || !bvh2.nodes.par_iter().any(mixed) {
         return Cow::Borrowed(bvh2);
     }
     let mut out = Bvh2 { nodes: vec![bvh2.nodes[0]], prim_ids: bvh2.prim_ids.clone() };
@@ -579,15 +583,15 @@ pub fn collapse_for<T: TriBlock>(
         end = (end.0 + s.0, end.1 + s.1, end.2 + s.2);
     }
     let top = bases.first().copied().unwrap_or(end);
-    out.nodes.reserve_exact(end.0 - out.nodes.len());
-    out.tris.reserve_exact(end.1 - out.tris.len());
-    let grow = end.0 - out.nodes.len();
-    out.nodes.par_extend(rayon::iter::repeat_n(Bvh8Node::EMPTY, grow));
-    let grow = end.1 - out.tris.len();
-    out.tris.par_extend(rayon::iter::repeat_n(T::EMPTY, grow));
+    // The final arrays: fresh zero pages that the parallel tasks below touch first (see
+    // `BvhArray::zeroed`), with the top of the tree copied in.
+    let mut nodes_out = BvhArray::<Bvh8Node>::zeroed(end.0);
+    nodes_out[..top.0].copy_from_slice(&out.nodes);
+    let mut tris_out = BvhArray::<T>::zeroed(end.1);
+    tris_out[..top.1].copy_from_slice(&out.tris);
     out.spheres.resize(end.2, Sphere4::EMPTY);
     let (mut nodes, mut tris, mut spheres) =
-        (&mut out.nodes[top.0..], &mut out.tris[top.1..], &mut out.spheres[top.2..]);
+        (&mut nodes_out[top.0..], &mut tris_out[top.1..], &mut out.spheres[top.2..]);
     let mut parts = Vec::with_capacity(sizes.len());
     for (s, &bases) in sizes.iter().zip(&bases) {
         let (a, rest) = std::mem::take(&mut nodes).split_at_mut(s.0);
@@ -610,7 +614,7 @@ pub fn collapse_for<T: TriBlock>(
         })
         .collect();
     for (root, &(at, _)) in roots.into_iter().zip(&deferred) {
-        out.nodes[at] = root;
+        nodes_out[at] = root;
     }
-    out.into_bvh8(test)
+    Bvh8 { nodes: nodes_out, tris: tris_out, spheres: out.spheres.into(), test }
 }
