@@ -261,8 +261,10 @@ impl SceneBuilder {
                 })
                 .collect()
         };
-        let mut keep = 0usize;
-        for (i, &v) in verdicts.iter().enumerate() {
+        // Triangles before the first dropped one stay where they are (usually all of them).
+        let first_dropped = verdicts.iter().position(|&v| v != Verdict::Keep).unwrap_or(verdicts.len());
+        let mut keep = first_dropped;
+        for (i, &v) in verdicts.iter().enumerate().skip(first_dropped) {
             match v {
                 Verdict::NonFinite => {
                     report.dropped_non_finite += 1;
@@ -329,7 +331,10 @@ impl Filtered {
                 .chain((0..spheres.len()).into_par_iter().map(|i| BuildPrim::new(spheres.bounds(i), (nt + i) as u32)))
                 .collect()
         };
-        let bounds = prims.iter().fold(Aabb::EMPTY, |b, p| b.union(&p.bounds()));
+        let bounds = {
+            use rayon::prelude::*;
+            prims.par_iter().map(|p| p.bounds()).reduce(|| Aabb::EMPTY, |a, b| a.union(&b))
+        };
         let bvh2 = build_bvh2_kinds(&mut prims, opts, nt as u32);
         drop(prims);
         let mut scene =
