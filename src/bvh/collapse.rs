@@ -557,8 +557,9 @@ pub fn collapse_for<T: TriBlock>(
     use rayon::prelude::*;
     let bvh2 = pure_leaves(bvh2, first_sphere, &shape);
     let m = bvh2.nodes.len();
-    // Allocated and first written in parallel, as are the output arrays below: for large
-    // meshes the page faults of fresh memory are a large part of the cost.
+    // Allocated and first written in parallel (as the output arrays below are first written
+    // by parallel tasks): for large meshes the page faults of fresh memory are a large part
+    // of the cost.
     let p = Planned { bvh2: &bvh2, first_sphere, plans: (0..m).into_par_iter().map(|_| AtomicU64::new(0)).collect() };
     let mut out = Arrays { nodes: vec![Bvh8Node::EMPTY], tris: Vec::new(), spheres: Vec::new() };
     if bvh2.is_empty() {
@@ -606,7 +607,9 @@ pub fn collapse_for<T: TriBlock>(
         .zip(&deferred)
         .map(|(mut part, &(_, n))| {
             let root = em.clone_plain().fill(n, &mut part);
-            debug_assert_eq!(
+            // Every element of the reserved ranges is written (zero pages are not valid
+            // nodes: a zero child reference would point back at the root).
+            assert_eq!(
                 (part.used.0, part.used.1, part.used.2),
                 (part.nodes.len(), part.tris.len(), part.spheres.len())
             );
