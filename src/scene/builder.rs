@@ -359,10 +359,19 @@ impl Filtered {
 /// On such a triangle both triangle tests divide by a determinant made of rounding error and
 /// report hits at arbitrary distances, outside the triangle's box (where no BVH would look).
 pub fn is_degenerate(a: Vec3, b: Vec3, c: Vec3) -> bool {
-    if (b - a).cross(c - a) == Vec3::ZERO {
+    let (f1, f2) = (b - a, c - a);
+    let n = f1.cross(f2);
+    if n == Vec3::ZERO {
         return true;
     }
-    let (e1, e2) = ((b - a).as_dvec3(), (c - a).as_dvec3());
+    // Most triangles are far from the limit: decided in `f32` with a factor-4 margin (far
+    // above `f32` rounding of these products) whenever no product overflows or underflows.
+    let limit = 4.0 * f32::EPSILON;
+    let (lhs, rhs) = (n.length_squared(), limit * limit * f1.length_squared() * f2.length_squared());
+    if lhs.is_normal() && rhs.is_normal() && lhs > 4.0 * rhs {
+        return false;
+    }
+    let (e1, e2) = (f1.as_dvec3(), f2.as_dvec3());
     let limit = 4.0 * f32::EPSILON as f64;
     e1.cross(e2).length_squared() <= limit * limit * e1.length_squared() * e2.length_squared()
 }
@@ -370,6 +379,35 @@ pub fn is_degenerate(a: Vec3, b: Vec3, c: Vec3) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn degeneracy_fast_path_agrees_with_the_f64_test() {
+        let reference = |a: Vec3, b: Vec3, c: Vec3| {
+            let (e1, e2) = ((b - a).as_dvec3(), (c - a).as_dvec3());
+            let limit = 4.0 * f32::EPSILON as f64;
+            (b - a).cross(c - a) == Vec3::ZERO
+                || e1.cross(e2).length_squared() <= limit * limit * e1.length_squared() * e2.length_squared()
+        };
+        let mut seed = 1u64;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+        };
+        let (mut degenerate, mut checked) = (0, 0);
+        for i in 0..200_000 {
+            let scale = [1e-30f32, 1e-6, 1.0, 1e6, 1e17][i % 5];
+            let a = Vec3::new(rnd(), rnd(), rnd()) * scale;
+            let d = Vec3::new(rnd(), rnd(), rnd()) * scale;
+            // c near the line through a and b: from collinear to clearly off it.
+            let off = [0.0, 1e-9, 1e-7, 3e-7, 1e-6, 1e-3, 1.0][i % 7];
+            let b = a + d;
+            let c = a + d * rnd() * 3.0 + Vec3::new(rnd(), rnd(), rnd()) * scale * off;
+            assert_eq!(is_degenerate(a, b, c), reference(a, b, c), "{a} {b} {c}");
+            degenerate += reference(a, b, c) as usize;
+            checked += 1;
+        }
+        assert!(degenerate > 10_000 && checked - degenerate > 10_000, "{degenerate} of {checked}");
+    }
 
     #[test]
     fn rejects_bad_indices_and_materials() {
