@@ -380,31 +380,23 @@ fn choose_split(
     let mut best = (f32::INFINITY, 0usize, 0usize); // (cost, axis, split bin)
     for axis in (0..3).filter(|&a| ext[a] > 0.0) {
         let b = &scratch.bins[axis * MAX_BINS..axis * MAX_BINS + k];
-        // Empty bins change nothing: the right-hand area is carried over, and a split after
-        // an empty bin is the split before it (already costed; ties keep the first), so
-        // small nodes, whose bins are mostly empty, skip most of the work.
-        let (mut acc, mut cnt, mut area) = (Box4::EMPTY, 0u32, 0.0f32);
+        // Branch-free sweeps: the bins of small nodes are mostly empty, in no predictable
+        // pattern. An empty bin's box is the identity of `union` (and has no area), and a
+        // split with nothing on one side costs infinity.
+        let (mut acc, mut cnt) = (Box4::EMPTY, 0u32);
         for i in (1..k).rev() {
-            if b[i].count > 0 {
-                acc = acc.union(&b[i].bounds);
-                cnt += b[i].count;
-                area = acc.half_area();
-            }
-            scratch.right_area[i] = area;
+            acc = acc.union(&b[i].bounds);
+            cnt += b[i].count;
+            scratch.right_area[i] = acc.half_area();
             scratch.right_count[i] = cnt;
         }
         let (mut acc, mut cnt) = (Box4::EMPTY, 0u32);
         for i in 0..k - 1 {
-            if b[i].count == 0 {
-                continue;
-            }
             acc = acc.union(&b[i].bounds);
             cnt += b[i].count;
             let right = scratch.right_count[i + 1];
-            if right == 0 {
-                break;
-            }
             let cost = acc.half_area() * cnt as f32 + scratch.right_area[i + 1] * right as f32;
+            let cost = if cnt == 0 || right == 0 { f32::INFINITY } else { cost };
             if cost < best.0 {
                 best = (cost, axis, i + 1);
             }
