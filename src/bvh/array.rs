@@ -1,12 +1,13 @@
-//! The arrays of the 8-wide BVH: owned, or used in place from a memory-mapped cache file.
+//! The arrays of the 8-wide BVH: owned, fresh zero pages, or used in place from a
+//! memory-mapped cache file.
 
 use std::ops::{Deref, DerefMut, Range};
 use std::sync::Arc;
 
-/// An array of BVH nodes or leaf blocks: the `Vec` a build filled, or a section of a
-/// memory-mapped BVH cache file ([`crate::scene::cache`]) used where it lies. Reads see a
-/// slice either way; the first mutable access ([`BvhArray::to_mut`], `DerefMut`) copies a
-/// mapped array into an owned one.
+/// An array of BVH nodes or leaf blocks: a `Vec`, fresh anonymous memory a build filled, or
+/// a section of a memory-mapped BVH cache file ([`crate::scene::cache`]) used where it lies.
+/// Reads see a slice either way; the first mutable access to a mapped array
+/// ([`BvhArray::to_mut`], `DerefMut`) copies it into an owned one.
 ///
 /// Using the mapping in place is what makes a cached start cheap: copying the Stanford
 /// dragon's 59 MB BVH8 out of the mapping into fresh memory took 25–36 ms of a 60 ms start
@@ -64,7 +65,7 @@ impl<T: bytemuck::Pod> BvhArray<T> {
         }
     }
 
-    /// The elements as a `Vec` (copied if they are mapped).
+    /// The elements as a `Vec` (copied unless they are in one).
     pub fn into_vec(mut self) -> Vec<T> {
         std::mem::take(self.to_mut())
     }
