@@ -266,19 +266,14 @@ impl SceneBuilder {
         let mut keep = first_dropped;
         for (i, &v) in verdicts.iter().enumerate().skip(first_dropped) {
             match v {
-                Verdict::NonFinite => {
-                    report.dropped_non_finite += 1;
-                    continue;
+                Verdict::NonFinite => report.dropped_non_finite += 1,
+                Verdict::Degenerate => report.dropped_degenerate += 1,
+                Verdict::Keep => {
+                    triangles.indices[keep] = triangles.indices[i];
+                    triangles.material[keep] = triangles.material[i];
+                    keep += 1;
                 }
-                Verdict::Degenerate => {
-                    report.dropped_degenerate += 1;
-                    continue;
-                }
-                Verdict::Keep => {}
             }
-            triangles.indices[keep] = triangles.indices[i];
-            triangles.material[keep] = triangles.material[i];
-            keep += 1;
         }
         triangles.indices.truncate(keep);
         triangles.material.truncate(keep);

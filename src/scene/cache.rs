@@ -9,8 +9,9 @@
 //! XXH3-64 checksum of all its other bytes agrees; the BVH8's arrays are then used in place
 //! in the mapping ([`crate::bvh::BvhArray`]; the binary BVH, when kept, is copied out) and
 //! checked for the ranges the traversal kernels index with (child and block indices, depth,
-//! primitive ids, empty slots), so that even a forged file cannot make a query panic. Anything else is reported in [`CacheReport::rejected`], rebuilt and
-//! overwritten. Files are written atomically (a temporary file renamed over the old one).
+//! primitive ids, empty slots), so that even a forged file cannot make a query panic.
+//! Anything else is reported in [`CacheReport::rejected`], rebuilt and overwritten. Files
+//! are written atomically (a temporary file renamed over the old one).
 //!
 //! Layout (little-endian, as the machine writes it):
 //!
@@ -22,7 +23,7 @@
 //!
 //! Sections are looked up by name and element size, so a new leaf block type (for example
 //! watertight triangle blocks) is one more `Pod` array: a name, a `SectionWriter::push` in
-//! `store` and a `CacheFile::section` call in `read_accel`.
+//! `store` and a `CacheFile::section_in_place` call in `read_accel`.
 
 use crate::bvh::{BuildOptions, Bvh2, Bvh2Node, Bvh8, Bvh8Node, BvhArray, DefaultTriBlock, LeafKind, MAX_DEPTH};
 use crate::geometry::TriangleTest;
