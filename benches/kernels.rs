@@ -72,7 +72,7 @@ fn blocks<B: TriBlock>(tris: &[[Vec3; 3]]) -> Vec<B> {
 
 fn box_tests(c: &mut Criterion) {
     let (rays, nodes) = (rays(1), nodes(2));
-    let pre: Vec<Ray1> = rays.iter().map(Ray1::new).collect();
+    let pre: Vec<Ray1<F32x8>> = rays.iter().map(Ray1::new).collect();
     // Validate: SIMD masks equal the scalar twin.
     for (r, n) in pre.iter().zip(nodes.iter().cycle()) {
         assert_eq!(r.intersect_node(n, f32::INFINITY).0, r.intersect_node_scalar(n, f32::INFINITY));
@@ -188,7 +188,7 @@ fn triangle_tests(c: &mut Criterion) {
         sph.set(i, Vec3::new(i as f32 * 0.3 - 0.45, 0.0, 0.0), 0.2, i as u32);
     }
     for r in rays.iter().take(256) {
-        let (m, t) = sph.intersect1(r.origin, r.dir, 0.0, f32::INFINITY);
+        let (m, t) = sph.intersect1::<F32x4>(r.origin, r.dir, 0.0, f32::INFINITY);
         let twin = sph.intersect1_scalar(r.origin, r.dir, 0.0, f32::INFINITY);
         for (i, w) in twin.iter().enumerate() {
             assert_eq!(w.map(f32::to_bits), (m >> i & 1 == 1).then(|| t.lane(i).to_bits()));
@@ -200,7 +200,7 @@ fn triangle_tests(c: &mut Criterion) {
         b.iter(|| {
             let mut acc = 0u32;
             for r in &rays {
-                acc ^= sph.intersect1(r.origin, r.dir, 0.0, f32::INFINITY).0;
+                acc ^= sph.intersect1::<F32x4>(r.origin, r.dir, 0.0, f32::INFINITY).0;
             }
             black_box(acc)
         })

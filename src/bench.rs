@@ -6,120 +6,19 @@
 //! tiles ([`CHUNK`] rays). Each method runs once to warm up and to validate its checksum
 //! against the reference, then `runs` times; the median time is reported.
 //!
-//! The raypack side is the table [`RAYPACK_KERNELS`]: adding a kernel there adds it to the
-//! benchmark, to the criterion bench and to the Embree cross-check test.
+//! The raypack side is the kernel registry [`crate::kernels::KERNELS`], run on the scene's ISA
+//! tier (`--isa` lowers it, and limits Embree to the same tier).
 
+use crate::kernels::{KERNELS, Query};
 use crate::ray::{Hit, Ray};
 use crate::raysets::{self, Checksum};
 use crate::scene::Scene;
+use crate::simd::Isa;
 use rayon::prelude::*;
 use std::time::{Duration, Instant};
 
 /// Rays per work item when tracing on several threads: 64 tiles of 4×4.
 pub const CHUNK: usize = 1024;
-
-/// A raypack closest-hit kernel over a slice of rays.
-pub type IntersectKernel = fn(&Scene, &[Ray], &mut [Hit]);
-/// A raypack occlusion kernel over a slice of rays.
-pub type OccludedKernel = fn(&Scene, &[Ray], &mut [bool]);
-
-/// A raypack kernel of either query.
-#[derive(Clone, Copy, Debug)]
-pub enum Kernel {
-    /// Closest hit.
-    Intersect(IntersectKernel),
-    /// Any hit.
-    Occluded(OccludedKernel),
-}
-
-/// A named raypack kernel.
-#[derive(Clone, Copy, Debug)]
-pub struct RaypackKernel {
-    /// Name in tables and JSON.
-    pub name: &'static str,
-    /// The kernel.
-    pub kernel: Kernel,
-}
-
-fn reference_intersect1(scene: &Scene, rays: &[Ray], hits: &mut [Hit]) {
-    for (r, h) in rays.iter().zip(hits) {
-        *h = scene.intersect1_reference(r);
-    }
-}
-
-fn reference_occluded1(scene: &Scene, rays: &[Ray], out: &mut [bool]) {
-    for (r, o) in rays.iter().zip(out) {
-        *o = scene.occluded1_reference(r);
-    }
-}
-
-fn scene_intersect1(scene: &Scene, rays: &[Ray], hits: &mut [Hit]) {
-    for (r, h) in rays.iter().zip(hits) {
-        *h = scene.intersect1(r);
-    }
-}
-
-fn scene_occluded1(scene: &Scene, rays: &[Ray], out: &mut [bool]) {
-    for (r, o) in rays.iter().zip(out) {
-        *o = scene.occluded1(r);
-    }
-}
-
-macro_rules! packet_kernels {
-    ($intersect:ident, $occluded:ident, $packet:ty, $k:expr) => {
-        pub(super) fn $intersect(scene: &Scene, rays: &[Ray], hits: &mut [Hit]) {
-            for (r, h) in rays.chunks($k).zip(hits.chunks_mut($k)) {
-                let (mut p, valid) = <$packet>::from_rays(r);
-                scene.$intersect(&mut p, valid);
-                for (i, out) in h.iter_mut().enumerate() {
-                    *out = p.hit(i);
-                }
-            }
-        }
-
-        pub(super) fn $occluded(scene: &Scene, rays: &[Ray], out: &mut [bool]) {
-            for (r, o) in rays.chunks($k).zip(out.chunks_mut($k)) {
-                let (p, valid) = <$packet>::from_rays(r);
-                let bits = scene.$occluded(&p, valid);
-                for (i, x) in o.iter_mut().enumerate() {
-                    *x = bits >> i & 1 != 0;
-                }
-            }
-        }
-    };
-}
-
-mod packets {
-    use super::*;
-    use crate::ray::{RayPacket8, RayPacket16};
-    packet_kernels!(intersect8, occluded8, RayPacket8, 8);
-    packet_kernels!(intersect16, occluded16, RayPacket16, 16);
-}
-
-fn stream_intersect(scene: &Scene, rays: &[Ray], hits: &mut [Hit]) {
-    scene.intersect_batch(rays, hits);
-}
-
-fn stream_occluded(scene: &Scene, rays: &[Ray], out: &mut [bool]) {
-    scene.occluded_batch(rays, out);
-}
-
-/// Every raypack kernel that benchmarks time and the Embree cross-check verifies. One line
-/// per kernel; packet kernels receive consecutive rays (4×4 tiles for primary rays). The
-/// stream kernels are what `Scene::intersect_stream` / `occluded_stream` run on each thread's
-/// chunk (here the bench spreads the chunks over threads itself).
-pub const RAYPACK_KERNELS: &[RaypackKernel] = &[
-    RaypackKernel { name: "bvh2 reference intersect1", kernel: Kernel::Intersect(reference_intersect1) },
-    RaypackKernel { name: "bvh2 reference occluded1", kernel: Kernel::Occluded(reference_occluded1) },
-    RaypackKernel { name: "Scene::intersect1", kernel: Kernel::Intersect(scene_intersect1) },
-    RaypackKernel { name: "Scene::occluded1", kernel: Kernel::Occluded(scene_occluded1) },
-    RaypackKernel { name: "Scene::intersect8", kernel: Kernel::Intersect(packets::intersect8) },
-    RaypackKernel { name: "Scene::occluded8", kernel: Kernel::Occluded(packets::occluded8) },
-    RaypackKernel { name: "Scene::intersect16", kernel: Kernel::Intersect(packets::intersect16) },
-    RaypackKernel { name: "Scene::occluded16", kernel: Kernel::Occluded(packets::occluded16) },
-    RaypackKernel { name: "Scene::intersect_stream", kernel: Kernel::Intersect(stream_intersect) },
-    RaypackKernel { name: "Scene::occluded_stream", kernel: Kernel::Occluded(stream_occluded) },
-];
 
 /// Bytes of raypack's acceleration structure over `scene`: the BVH8 nodes and its leaf blocks
 /// (which hold their own copies of the triangles, as Embree's `Triangle4` leaves do), the
@@ -153,16 +52,16 @@ impl Run<'_> {
     }
 }
 
-/// [`RAYPACK_KERNELS`] bound to `scene`.
+/// The kernels of [`crate::kernels::KERNELS`] bound to `scene` (on its ISA).
 pub fn raypack_methods(scene: &Scene) -> Vec<Method<'_>> {
-    RAYPACK_KERNELS
+    KERNELS
         .iter()
         .map(|k| Method {
             tracer: "raypack",
             name: k.name.to_string(),
-            run: match k.kernel {
-                Kernel::Intersect(f) => Run::Intersect(Box::new(move |r, h| f(scene, r, h))),
-                Kernel::Occluded(f) => Run::Occluded(Box::new(move |r, o| f(scene, r, o))),
+            run: match k.query {
+                Query::Intersect(f) => Run::Intersect(Box::new(move |r, h| f(scene, r, h))),
+                Query::Occluded(f) => Run::Occluded(Box::new(move |r, o| f(scene, r, o))),
             },
         })
         .collect()
@@ -276,11 +175,14 @@ pub struct BenchSettings {
     pub threads: Vec<usize>,
     /// Seed of the diffuse bounces.
     pub seed: u64,
+    /// The ISA tier to run raypack's kernels on, and the highest Embree may use; `None`
+    /// keeps the scene's tier and lets Embree pick its best.
+    pub isa: Option<Isa>,
 }
 
 impl Default for BenchSettings {
     fn default() -> Self {
-        Self { width: 1024, height: 768, runs: 5, against_embree: false, threads: vec![1, 0], seed: 1 }
+        Self { width: 1024, height: 768, runs: 5, against_embree: false, threads: vec![1, 0], seed: 1, isa: None }
     }
 }
 
@@ -357,7 +259,7 @@ fn repetitions(warm_up: Duration) -> usize {
 /// caller in `raypack_build` (timed there); `log` receives progress lines.
 pub fn run_bench(
     name: &str,
-    scene: &Scene,
+    scene: &mut Scene,
     raypack_build: BuildFigures,
     settings: &BenchSettings,
     log: &mut dyn FnMut(&str),
@@ -369,12 +271,16 @@ pub fn run_bench(
     if settings.against_embree {
         return Err(BenchError::EmbreeNotBuilt);
     }
+    if let Some(isa) = settings.isa {
+        scene.set_isa(isa).map_err(|e| BenchError::Settings(e.to_string()))?;
+    }
+    let scene = &*scene;
     let mut report = BenchReport {
         scene: name.to_string(),
         triangles: scene.num_triangles(),
         resolution: (settings.width, settings.height),
         runs: settings.runs,
-        notes: Vec::new(),
+        notes: vec![format!("raypack ISA: {} (CPU's best: {})", scene.isa(), Isa::detected())],
         build: vec![raypack_build],
         rows: Vec::new(),
     };
@@ -385,7 +291,8 @@ pub fn run_bench(
         let mut v = Vec::new();
         for q in [EmbreeQuality::Medium, EmbreeQuality::High] {
             log(&format!("building Embree BVH ({})", q.name()));
-            let e = EmbreeScene::new(scene, q)?;
+            let options = crate::embree::EmbreeOptions { quality: q, max_isa: settings.isa, ..Default::default() };
+            let e = EmbreeScene::with_options(scene, options)?;
             report.build.push(BuildFigures {
                 tracer: "embree",
                 quality: q.name().to_string(),
@@ -396,8 +303,9 @@ pub fn run_bench(
         }
         let e = &v[0];
         report.notes.push(format!(
-            "Embree {}: native 8-wide packets {}, 16-wide {}",
+            "Embree {} (max_isa {}): native 8-wide packets {}, 16-wide {}",
             e.version(),
+            settings.isa.map_or("none", |i| i.name()),
             if e.native_packets(EmbreeWidth::W8) { "yes" } else { "no (emulated)" },
             if e.native_packets(EmbreeWidth::W16) { "yes" } else { "no (emulated)" },
         ));
@@ -418,10 +326,8 @@ pub fn run_bench(
     let all = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
     for set in &sets {
         let occlusion = set.kind.is_occlusion();
-        let reference = methods
-            .iter()
-            .find(|m| m.run.is_occlusion() == occlusion)
-            .expect("RAYPACK_KERNELS has a kernel of each query");
+        let reference =
+            methods.iter().find(|m| m.run.is_occlusion() == occlusion).expect("KERNELS has a kernel of each query");
         let mut ref_out = output_for(&reference.run, set.rays.len());
         trace(&reference.run, &set.rays, &mut ref_out);
         let ref_sum = ref_out.checksum(&set.rays);
@@ -611,10 +517,10 @@ mod tests {
         let (scene, _) = b.commit(&BuildOptions::default());
         let build = BuildFigures { tracer: "raypack", quality: "medium".into(), seconds: 0.0, bytes: 0 };
         let settings = BenchSettings { width: 32, height: 24, runs: 1, threads: vec![1, 2], ..Default::default() };
-        let report = run_bench("sphere", &scene, build, &settings, &mut |_| {}).unwrap();
+        let mut scene = scene;
+        let report = run_bench("sphere", &mut scene, build, &settings, &mut |_| {}).unwrap();
         // 3 sets x 2 thread counts x the kernels of the matching query.
-        let per_query =
-            |occ: bool| RAYPACK_KERNELS.iter().filter(move |k| matches!(k.kernel, Kernel::Occluded(_)) == occ);
+        let per_query = |occ: bool| KERNELS.iter().filter(move |k| k.is_occlusion() == occ);
         assert_eq!(report.rows.len(), 2 * (2 * per_query(false).count() + per_query(true).count()));
         assert!(report.rows.iter().all(|r| !r.checksum_differs));
         let primary = report.rows.iter().find(|r| r.rays == "primary").unwrap();
@@ -630,10 +536,10 @@ mod tests {
     #[cfg(not(feature = "embree"))]
     #[test]
     fn against_embree_without_the_feature_is_a_clear_error() {
-        let (scene, _) = SceneBuilder::new().commit(&BuildOptions::default());
+        let (mut scene, _) = SceneBuilder::new().commit(&BuildOptions::default());
         let build = BuildFigures { tracer: "raypack", quality: "medium".into(), seconds: 0.0, bytes: 0 };
         let settings = BenchSettings { against_embree: true, ..Default::default() };
-        let err = run_bench("empty", &scene, build, &settings, &mut |_| {}).unwrap_err();
+        let err = run_bench("empty", &mut scene, build, &settings, &mut |_| {}).unwrap_err();
         assert!(matches!(err, BenchError::EmbreeNotBuilt));
         assert!(err.to_string().contains("--features embree"));
     }

@@ -11,6 +11,7 @@
 use crate::math::Vec3;
 use crate::ray::{Hit, Ray};
 use crate::scene::Scene;
+use crate::simd::Isa;
 use std::ffi::{CStr, c_char, c_int};
 use std::mem::{align_of, offset_of, size_of};
 use std::ptr::NonNull;
@@ -66,6 +67,7 @@ unsafe extern "C" {
         quality: c_int,
         flags: c_int,
         threads: c_int,
+        max_isa: *const c_char,
         error: *mut *const c_char,
     ) -> *mut RpEmbree;
     fn rp_embree_commit(e: *mut RpEmbree) -> c_int;
@@ -116,11 +118,15 @@ pub struct EmbreeOptions {
     /// configuration); 0 (the default) uses every hardware thread. Queries run on the
     /// caller's threads whatever this is.
     pub threads: usize,
+    /// The highest ISA Embree may use (`max_isa=` in the device configuration), so that a
+    /// comparison at a lower raypack [`Isa`] restricts both tracers; `None` lets Embree pick
+    /// the CPU's best.
+    pub max_isa: Option<Isa>,
 }
 
 impl Default for EmbreeOptions {
     fn default() -> Self {
-        Self { quality: EmbreeQuality::Medium, robust: false, threads: 0 }
+        Self { quality: EmbreeQuality::Medium, robust: false, threads: 0, max_isa: None }
     }
 }
 
@@ -232,10 +238,17 @@ impl EmbreeScene {
             EmbreeQuality::High => 2,
         };
         let flags = if options.robust { 1 } else { 0 };
+        let max_isa: &CStr = match options.max_isa {
+            None => c"",
+            Some(Isa::Baseline) => c"sse2",
+            Some(Isa::Avx2) => c"avx2",
+            Some(Isa::Avx512) => c"avx512",
+        };
         let mut error: *const c_char = std::ptr::null();
         // SAFETY: `positions` is `len` contiguous `Vec3`s, i.e. `3 len` f32 (size asserted
         // above); `indices` is `len` contiguous `[u32; 3]`; the shim copies both before
-        // returning and writes `error` only through the valid pointer we pass.
+        // returning, reads `max_isa` as a NUL-terminated string and writes `error` only through
+        // the valid pointer we pass.
         let raw = unsafe {
             rp_embree_new(
                 positions.as_ptr().cast::<f32>(),
@@ -245,6 +258,7 @@ impl EmbreeScene {
                 quality,
                 flags,
                 options.threads.min(c_int::MAX as usize) as c_int,
+                max_isa.as_ptr(),
                 &mut error,
             )
         };

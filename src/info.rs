@@ -6,6 +6,7 @@ use crate::bvh::{BuildOptions, BuildQuality, Bvh2, Bvh8Stats, BvhStats};
 use crate::io::LoadError;
 use crate::math::Aabb;
 use crate::scene::{CommitReport, Scene, SceneBuilder, TrianglesSoa};
+use crate::simd::Isa;
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -30,6 +31,9 @@ pub struct InfoOptions {
     /// second reuses pages the first freed. Comparing each tracer's figures from the run in
     /// which it went first compares cold builds with cold builds.
     pub embree_first: bool,
+    /// The ISA tier for raypack's kernels and the highest Embree may use (`None`: the
+    /// process's default, [`Isa::default_for_process`], and Embree's own best).
+    pub isa: Option<Isa>,
 }
 
 impl Default for InfoOptions {
@@ -41,6 +45,7 @@ impl Default for InfoOptions {
             keep_bvh2: false,
             against_embree: false,
             embree_first: false,
+            isa: None,
         }
     }
 }
@@ -124,6 +129,8 @@ pub struct SceneInfo {
     pub has_camera: bool,
     /// Rayon threads the builds ran on.
     pub threads: usize,
+    /// The ISA tier of raypack's kernels (and Embree's limit, with `against_embree`).
+    pub isa: Isa,
     /// Bytes of the committed scene store (vertex positions and normals, indices, per-triangle
     /// materials, spheres).
     pub store_bytes: usize,
@@ -198,6 +205,7 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, InfoErro
         lights: 0,
         has_camera: false,
         threads: rayon::current_num_threads(),
+        isa: opts.isa.unwrap_or_else(Isa::default_for_process),
         store_bytes: 0,
         builds: Vec::new(),
         embree_builds: Vec::new(),
@@ -205,7 +213,7 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, InfoErro
     };
     if opts.against_embree && opts.embree_first {
         let (kept, _) = builder.clone().filter();
-        info.embree_builds = embree_builds(&kept.triangles, kept.spheres.len())?;
+        info.embree_builds = embree_builds(&kept.triangles, kept.spheres.len(), opts.isa)?;
     }
     let mut builder = Some(builder);
     for (i, &quality) in opts.qualities.iter().enumerate() {
@@ -253,7 +261,7 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, InfoErro
             peak_added_bytes,
         });
         if last && opts.against_embree && !opts.embree_first {
-            info.embree_builds = embree_builds(&scene.triangles, scene.num_spheres())?;
+            info.embree_builds = embree_builds(&scene.triangles, scene.num_spheres(), opts.isa)?;
         }
     }
     info.peak_resident_bytes = peak_resident_bytes();
@@ -263,7 +271,11 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, InfoErro
 /// Embree MEDIUM and HIGH builds of a scene's triangles on the current rayon pool's thread
 /// count; refused when the scene also has `spheres` (the Embree wrapper passes triangles only).
 #[cfg(feature = "embree")]
-fn embree_builds(triangles: &TrianglesSoa, spheres: usize) -> Result<Vec<EmbreeBuildInfo>, InfoError> {
+fn embree_builds(
+    triangles: &TrianglesSoa,
+    spheres: usize,
+    isa: Option<Isa>,
+) -> Result<Vec<EmbreeBuildInfo>, InfoError> {
     use crate::embree::{EmbreeError, EmbreeOptions, EmbreeQuality, EmbreeScene};
     if spheres > 0 {
         return Err(InfoError::Embree(EmbreeError::Spheres(spheres).to_string()));
@@ -271,7 +283,8 @@ fn embree_builds(triangles: &TrianglesSoa, spheres: usize) -> Result<Vec<EmbreeB
     let (positions, indices) = (&triangles.positions, &triangles.indices);
     let mut out = Vec::new();
     for quality in [EmbreeQuality::Medium, EmbreeQuality::High] {
-        let options = EmbreeOptions { quality, threads: rayon::current_num_threads(), ..EmbreeOptions::default() };
+        let options =
+            EmbreeOptions { quality, threads: rayon::current_num_threads(), max_isa: isa, ..EmbreeOptions::default() };
         let peak = BuildPeak::start();
         let e = EmbreeScene::from_mesh(positions, indices, options).map_err(|e| InfoError::Embree(e.to_string()))?;
         out.push(EmbreeBuildInfo {
@@ -285,7 +298,7 @@ fn embree_builds(triangles: &TrianglesSoa, spheres: usize) -> Result<Vec<EmbreeB
 }
 
 #[cfg(not(feature = "embree"))]
-fn embree_builds(_: &TrianglesSoa, _: usize) -> Result<Vec<EmbreeBuildInfo>, InfoError> {
+fn embree_builds(_: &TrianglesSoa, _: usize, _: Option<Isa>) -> Result<Vec<EmbreeBuildInfo>, InfoError> {
     Ok(Vec::new())
 }
 
@@ -329,6 +342,7 @@ impl SceneInfo {
             self.per_triangle(self.store_bytes)
         );
         let _ = writeln!(s, "threads      {}", self.threads);
+        let _ = writeln!(s, "isa          {} (the CPU's best: {})", self.isa, Isa::detected());
         for bi in &self.builds {
             let how = if bi.from_cache { "loaded from the BVH cache" } else { "built" };
             let _ = writeln!(s, "{:<12} {:.4} s, {how}", format!("build {}", quality_name(bi.quality)), bi.seconds);
@@ -429,6 +443,7 @@ impl SceneInfo {
             "materials": self.materials,
             "lights": self.lights,
             "threads": self.threads,
+            "isa": self.isa.name(),
             "store_bytes": self.store_bytes,
             "store_bytes_per_triangle": self.per_triangle(self.store_bytes),
             "builds": builds,

@@ -62,6 +62,7 @@ pub mod generate;
 pub mod geometry;
 pub mod info;
 pub mod io;
+pub mod kernels;
 pub mod math;
 pub mod ray;
 pub mod raysets;
@@ -69,10 +70,11 @@ pub mod render;
 pub mod scene;
 pub mod simd;
 
-pub use bvh::{BuildOptions, BuildQuality, Bvh8Node, BvhStats, SplitMethod};
+pub use bvh::{BuildOptions, BuildQuality, Bvh8Node, BvhStats, SplitMethod, TraversalCounts};
 pub use math::{Aabb, Mat3, Mat4, Vec3};
-pub use ray::{Hit, Ray, RayPacket8, RayPacket16};
+pub use ray::{Hit, Ray, RayPacket, RayPacket8, RayPacket16};
 pub use scene::{
     Bsdf, CacheError, CacheReport, Camera, CommitReport, Light, Material, MaterialId, Scene, SceneBuilder, SceneError,
     SurfaceHit,
 };
+pub use simd::{Isa, IsaError};

@@ -6,7 +6,7 @@
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use raypack::io::LoadError;
 use raypack::render::{self, IntegratorKind, RenderSettings};
-use raypack::{BuildOptions, BuildQuality, Scene, SceneBuilder};
+use raypack::{BuildOptions, BuildQuality, Isa, Scene, SceneBuilder};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
@@ -61,6 +61,10 @@ struct BenchArgs {
     /// Möller–Trumbore.
     #[arg(long)]
     watertight: bool,
+    /// Run raypack's kernels on this ISA tier (sse, avx2, avx512; default: the CPU's best,
+    /// or RAYPACK_ISA) and limit Embree to it.
+    #[arg(long, value_parser = parse_isa)]
+    isa: Option<Isa>,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -145,6 +149,10 @@ struct RenderArgs {
     /// Möller–Trumbore.
     #[arg(long)]
     watertight: bool,
+    /// Run the kernels on this ISA tier (sse, avx2, avx512; default: the CPU's best, or
+    /// RAYPACK_ISA).
+    #[arg(long, value_parser = parse_isa)]
+    isa: Option<Isa>,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -193,6 +201,15 @@ struct InfoArgs {
     /// touching fresh memory; compare each tracer's figures from a run in which it went first).
     #[arg(long, requires = "against")]
     embree_first: bool,
+    /// Run raypack's kernels on this ISA tier (sse, avx2, avx512; default: the CPU's best,
+    /// or RAYPACK_ISA) and limit Embree to it.
+    #[arg(long, value_parser = parse_isa)]
+    isa: Option<Isa>,
+}
+
+/// Parses `--isa`, refusing a tier the CPU lacks.
+fn parse_isa(s: &str) -> Result<Isa, String> {
+    Isa::parse(s).and_then(Isa::check).map_err(|e| e.to_string())
 }
 
 /// A failure the CLI reports: bad input or environment exits with 2, as issue #2 asks.
@@ -225,6 +242,16 @@ fn main() -> ExitCode {
             return ExitCode::from(code);
         }
     };
+    match Isa::from_env() {
+        Err(e) => {
+            eprintln!("raypack: error: RAYPACK_ISA: {e}");
+            return ExitCode::from(2);
+        }
+        Ok(Some(isa)) if !isa.is_supported() => {
+            eprintln!("[raypack] warning: RAYPACK_ISA={isa}: this CPU's best is {}; using it", Isa::detected());
+        }
+        _ => {}
+    }
     let result = match cli.command {
         Command::Render(a) => cmd_render(a),
         Command::Info(a) => cmd_info(a),
@@ -315,8 +342,11 @@ fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         print_warnings(&warnings);
         let opts = BuildOptions { quality: a.quality.into(), watertight: a.watertight, ..BuildOptions::default() };
         let t = Instant::now();
-        let scene = commit(builder, &opts, a.bvh_cache.as_deref());
+        let mut scene = commit(builder, &opts, a.bvh_cache.as_deref());
         let setup_time = [("load", load_time), ("BVH build", t.elapsed().as_secs_f64())];
+        if let Some(isa) = a.isa {
+            scene.set_isa(isa).map_err(|e| CliError::Usage(e.to_string()))?;
+        }
         let aspect = width as f32 / height as f32;
         let camera = match &a.camera {
             Some(p) => raypack::io::camera_file::load_camera_file(p)?,
@@ -336,7 +366,11 @@ fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             russian_roulette: !a.no_russian_roulette,
         };
         let bar = progress_bar(width.div_ceil(render::TILE) * height.div_ceil(render::TILE));
-        eprintln!("[raypack] Rendering {width}x{height} with {} threads...", rayon::current_num_threads());
+        eprintln!(
+            "[raypack] Rendering {width}x{height} with {} threads ({} kernels)...",
+            rayon::current_num_threads(),
+            scene.isa()
+        );
         let out = render::render(&scene, &camera, &settings, &|done| bar.set_position(done));
         bar.finish_and_clear();
         eprintln!("[raypack] Rendering... 100%! ({:.4}s)", out.stats.time.as_secs_f64());
@@ -417,6 +451,7 @@ fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
         keep_bvh2: a.keep_bvh2,
         against_embree: a.against.is_some(),
         embree_first: a.embree_first,
+        isa: a.isa,
         ..InfoOptions::default()
     };
     if let Some(q) = a.quality {
@@ -451,8 +486,14 @@ fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     if a.runs == 0 {
         return Err(CliError::Usage("--runs 0: need at least one timed run".into()));
     }
-    let settings =
-        BenchSettings { width, height, runs: a.runs, against_embree: a.against.is_some(), ..Default::default() };
+    let settings = BenchSettings {
+        width,
+        height,
+        runs: a.runs,
+        against_embree: a.against.is_some(),
+        isa: a.isa,
+        ..Default::default()
+    };
     if settings.against_embree && !cfg!(feature = "embree") {
         return Err(raypack::bench::BenchError::EmbreeNotBuilt.into());
     }
@@ -462,7 +503,7 @@ fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     let t = Instant::now();
     // The binary BVH stays for the reference rows and the checksums they anchor.
     let opts = BuildOptions { quality, watertight: a.watertight, keep_bvh2: true, ..BuildOptions::default() };
-    let (scene, report) = match a.bvh_cache.as_deref() {
+    let (mut scene, report) = match a.bvh_cache.as_deref() {
         None => builder.commit(&opts),
         Some(dir) => {
             let (scene, report, cache) = builder.commit_cached(&opts, dir);
@@ -486,7 +527,7 @@ fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
         bytes: raypack_accel_bytes(&scene) as u64,
     };
     let name = a.scene.display().to_string();
-    let out = run_bench(&name, &scene, build, &settings, &mut |line| eprintln!("[raypack] {line}"))?;
+    let out = run_bench(&name, &mut scene, build, &settings, &mut |line| eprintln!("[raypack] {line}"))?;
     match a.json.as_deref() {
         Some(p) if p == Path::new("-") => println!("{:#}", out.json()),
         Some(p) => {

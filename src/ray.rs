@@ -60,6 +60,13 @@ impl Ray {
     /// such rays count as having no direction, like a zero one.
     pub const MIN_DIRECTION: f32 = 1e-18;
 
+    /// The eight floats `origin, dir, tnear, tfar`.
+    #[inline(always)]
+    pub fn to_array(&self) -> [f32; 8] {
+        let (o, d) = (self.origin, self.dir);
+        [o.x, o.y, o.z, d.x, d.y, d.z, self.tnear, self.tfar]
+    }
+
     /// Per-ray constants for slab tests: the safe reciprocal direction.
     #[inline]
     pub fn inv_dir(&self) -> Vec3 {
@@ -71,28 +78,36 @@ const _: () = assert!(std::mem::size_of::<Ray>() == 32 && std::mem::align_of::<R
 
 /// The rows `origin.x, origin.y, origin.z, dir.x, dir.y, dir.z, tnear, tfar` of up to 16
 /// rays (lanes past `rays.len()` repeat the first ray), by two 8 x 8 transposes.
-#[inline(always)]
+#[inline]
 pub fn transpose_rays(rays: &[Ray]) -> [[f32; 16]; 8] {
+    transpose_rays_in::<crate::simd::F32x8>(rays)
+}
+
+/// [`transpose_rays`] in the 8 lanes `V` of some ISA (the packet kernels use their own).
+#[inline(always)]
+pub fn transpose_rays_in<V: crate::simd::Transpose8>(rays: &[Ray]) -> [[f32; 16]; 8] {
     let n = rays.len().min(16);
     if n == 16 {
-        return transpose16(rays[..16].try_into().expect("16 rays"));
+        return transpose16::<V>(rays[..16].try_into().expect("16 rays"));
     }
     let mut full = [rays.first().copied().unwrap_or(Ray::new(Vec3::ZERO, Vec3::X)); 16];
     full[..n].copy_from_slice(&rays[..n]);
-    transpose16(&full)
+    transpose16::<V>(&full)
 }
 
 #[inline(always)]
-fn transpose16(rays: &[Ray; 16]) -> [[f32; 16]; 8] {
-    use crate::simd::F32x8;
-    // SAFETY: `Ray` is `repr(C)` of eight `f32` (asserted above); the read is unaligned.
-    let load = |r: &Ray| F32x8::new(unsafe { (r as *const Ray as *const [f32; 8]).read_unaligned() });
-    let lo = F32x8::transpose(std::array::from_fn(|i| load(&rays[i])));
-    let hi = F32x8::transpose(std::array::from_fn(|i| load(&rays[i + 8])));
+fn transpose16<V: crate::simd::Transpose8>(rays: &[Ray; 16]) -> [[f32; 16]; 8] {
+    let mut lo = [V::splat(0.0); 8];
+    let mut hi = [V::splat(0.0); 8];
+    for i in 0..8 {
+        lo[i] = V::load(&rays[i].to_array());
+        hi[i] = V::load(&rays[i + 8].to_array());
+    }
+    let (lo, hi) = (V::transpose8(lo), V::transpose8(hi));
     let mut rows = [[0.0f32; 16]; 8];
-    for ((row, a), b) in rows.iter_mut().zip(lo).zip(hi) {
-        row[..8].copy_from_slice(a.as_array());
-        row[8..].copy_from_slice(b.as_array());
+    for ((out, a), b) in rows.iter_mut().zip(lo).zip(hi) {
+        a.store(&mut out[..8]);
+        b.store(&mut out[8..]);
     }
     rows
 }
@@ -133,8 +148,22 @@ impl Hit {
     }
 }
 
+/// A packet of K rays and their hits in SoA rows ([`RayPacket8`], [`RayPacket16`]), as the
+/// packet queries read and write it.
+pub trait RayPacket {
+    /// Rays per packet.
+    const K: usize;
+    /// K lanes of the ISA `I`.
+    type Lanes<I: crate::simd::IsaLanes>: crate::simd::Lanes;
+    /// The rows `org_x, org_y, org_z`, `dir_x, dir_y, dir_z`, `tnear`, `tfar`.
+    fn ray_rows(&self) -> ([&[f32]; 3], [&[f32]; 3], &[f32], &[f32]);
+    /// Writes lane `i`'s result: `tfar = t`, `u`, `v`, `prim` for a hit, `prim = Hit::NONE`
+    /// (and nothing else) for a miss.
+    fn set_result(&mut self, i: usize, hit: &Hit);
+}
+
 macro_rules! ray_packet {
-    ($(#[$doc:meta])* $name:ident, $k:expr, $mask:ty) => {
+    ($(#[$doc:meta])* $name:ident, $k:expr, $mask:ty, $lanes:ident) => {
         $(#[$doc])*
         ///
         /// Structure of arrays, one row per component, in Embree's `RTCRayHitN` style: the
@@ -250,6 +279,24 @@ macro_rules! ray_packet {
                 }
             }
         }
+
+        impl RayPacket for $name {
+            const K: usize = $k;
+            type Lanes<I: crate::simd::IsaLanes> = I::$lanes;
+
+            #[inline(always)]
+            fn ray_rows(&self) -> ([&[f32]; 3], [&[f32]; 3], &[f32], &[f32]) {
+                ([&self.org_x, &self.org_y, &self.org_z], [&self.dir_x, &self.dir_y, &self.dir_z], &self.tnear, &self.tfar)
+            }
+
+            #[inline(always)]
+            fn set_result(&mut self, i: usize, hit: &Hit) {
+                self.prim[i] = hit.prim;
+                if hit.is_hit() {
+                    (self.tfar[i], self.u[i], self.v[i]) = (hit.t, hit.u, hit.v);
+                }
+            }
+        }
     };
 }
 
@@ -257,13 +304,15 @@ ray_packet!(
     /// Eight rays and their hits (AVX2 width).
     RayPacket8,
     8,
-    u8
+    u8,
+    F8
 );
 ray_packet!(
     /// Sixteen rays and their hits (AVX-512 width).
     RayPacket16,
     16,
-    u16
+    u16,
+    F16
 );
 const _: () = assert!(std::mem::size_of::<RayPacket8>() == 11 * 32 + 32);
 const _: () = assert!(std::mem::size_of::<RayPacket16>() == 11 * 64);

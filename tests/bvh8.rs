@@ -1,15 +1,17 @@
-//! The 8-wide BVH: structural invariants, and every BVH8 kernel (single ray, 8/16-ray
-//! packets, tiles, streams) answering exactly what the reference BVH2 and brute force answer.
+//! The 8-wide BVH: structural invariants, and every BVH8 kernel of the registry (single ray,
+//! 8/16-ray packets, streams), on every ISA tier the CPU has, answering exactly what the
+//! reference BVH2 and brute force answer.
 
 mod common;
 
-use common::{random_rays, scene_of};
+use common::{every_kernel, on_every_isa, random_rays, scene_of};
 use raypack::bvh::validate::validate_bvh8;
-use raypack::bvh::{Bvh8, CollapseMethod, CollapseOptions, collapse};
+use raypack::bvh::{Bvh8, CollapseMethod, CollapseOptions, NoCount, collapse};
 use raypack::generate::{grid, random_soup, uv_sphere};
 use raypack::geometry::{Tri4, Tri8, TriBlock};
+use raypack::kernels::Results;
 use raypack::render::sampler::Rng;
-use raypack::{BuildOptions, Camera, Hit, Ray, RayPacket8, RayPacket16, Scene, Vec3};
+use raypack::{BuildOptions, Camera, Hit, Isa, Ray, RayPacket8, RayPacket16, Scene, Vec3};
 
 fn prim_bounds(scene: &Scene) -> Vec<raypack::Aabb> {
     (0..scene.num_prims() as u32).map(|p| scene.prim_bounds(p)).collect()
@@ -31,18 +33,35 @@ fn same_hit(scene: &Scene, ray: &Ray, got: &Hit, want: &Hit, what: &str) {
     }
 }
 
-/// Checks every kernel against the reference on `rays`; returns the number of hits.
+/// Checks every kernel of the registry, on every ISA tier, against the reference on `rays`
+/// (and the packet kernels again with partial lane masks); returns the number of hits.
 fn check_kernels(scene: &Scene, rays: &[Ray], what: &str) -> usize {
     validate_bvh8(scene.bvh8(), &prim_bounds(scene)).unwrap_or_else(|e| panic!("{what}: invalid BVH8: {e}"));
     let want: Vec<Hit> = rays.iter().map(|r| scene.intersect1_reference(r)).collect();
     let want_occ: Vec<bool> = rays.iter().map(|r| scene.occluded1_reference(r)).collect();
-    let mut hits = 0;
-    for (i, r) in rays.iter().enumerate() {
-        same_hit(scene, r, &scene.intersect1(r), &want[i], &format!("{what} intersect1 ray {i}"));
-        assert_eq!(scene.occluded1(r), want_occ[i], "{what} occluded1 ray {i} {r:?}");
-        hits += want[i].is_hit() as usize;
+    for (kernel, results) in every_kernel(scene, rays) {
+        match results {
+            Results::Hits(h) => {
+                for (i, r) in rays.iter().enumerate() {
+                    same_hit(scene, r, &h[i], &want[i], &format!("{what} {kernel} ray {i}"));
+                }
+            }
+            Results::Occluded(o) => {
+                for (i, r) in rays.iter().enumerate() {
+                    assert_eq!(o[i], want_occ[i], "{what} {kernel} ray {i} {r:?}");
+                }
+            }
+        }
     }
-    // Packets with a different partial mask each time.
+    for (isa, scene) in on_every_isa(scene) {
+        check_partial_packets(&scene, rays, &want, &want_occ, &format!("{what} [{isa}]"));
+    }
+    want.iter().filter(|h| h.is_hit()).count()
+}
+
+/// Packets with a different partial mask each time: masked lanes get the reference's
+/// answer, the others are neither written nor reported.
+fn check_partial_packets(scene: &Scene, rays: &[Ray], want: &[Hit], want_occ: &[bool], what: &str) {
     let mut rng = Rng::new(7, 7);
     for (c, chunk) in rays.chunks(16).enumerate() {
         let (mut p16, full) = RayPacket16::from_rays(chunk);
@@ -76,20 +95,13 @@ fn check_kernels(scene: &Scene, rays: &[Ray], what: &str) -> usize {
                 if mask8 >> i & 1 == 1 {
                     same_hit(scene, &rays[k], &p8.hit(i), &want[k], &format!("{what} intersect8 ray {k}"));
                     assert_eq!(occ >> i & 1 == 1, want_occ[k], "{what} occluded8 ray {k}");
+                } else {
+                    assert_eq!(p8.prim[i], before.prim[i], "{what}: inactive lane written");
+                    assert_eq!(occ >> i & 1, 0);
                 }
             }
         }
     }
-    // Streams (tiles and single rays, over rayon).
-    let mut got = vec![Hit::MISS; rays.len()];
-    scene.intersect_stream(rays, &mut got);
-    let mut occ = vec![false; rays.len()];
-    scene.occluded_stream(rays, &mut occ);
-    for (i, r) in rays.iter().enumerate() {
-        same_hit(scene, r, &got[i], &want[i], &format!("{what} stream ray {i}"));
-        assert_eq!(occ[i], want_occ[i], "{what} occluded_stream ray {i}");
-    }
-    hits
 }
 
 /// Camera rays over the scene in 4 x 4 pixel tiles (the coherent case).
@@ -249,21 +261,23 @@ fn bvh8_invariants_for_every_collapse() {
             );
             validate_bvh8(&b4, &bounds).unwrap_or_else(|e| panic!("{what} {method:?} Tri4: {e}"));
             validate_bvh8(&b8, &bounds).unwrap_or_else(|e| panic!("{what} {method:?} Tri8: {e}"));
-            // Both block widths and both collapses give the reference's hits.
+            // Both block widths and both collapses give the reference's hits, on every ISA.
             for r in random_rays(&scene, 3000, 11) {
                 let want = scene.intersect1_reference(&r);
-                for got in [b4.intersect1(&r), b8.intersect1(&r)] {
-                    assert_eq!(got.t.to_bits(), want.t.to_bits(), "{what} {method:?}");
+                for isa in Isa::available() {
+                    for got in [b4.intersect1_with(isa, &r, &mut NoCount), b8.intersect1_with(isa, &r, &mut NoCount)] {
+                        assert_eq!(got.t.to_bits(), want.t.to_bits(), "{what} {method:?} {isa}");
+                    }
+                    assert_eq!(b4.occluded1_with(isa, &r, &mut NoCount), want.is_hit(), "{what} {method:?} {isa}");
+                    assert_eq!(b8.occluded1_with(isa, &r, &mut NoCount), want.is_hit(), "{what} {method:?} {isa}");
                 }
-                assert_eq!(b4.occluded1(&r), want.is_hit());
-                assert_eq!(b8.occluded1(&r), want.is_hit());
             }
             eprintln!("{what} {method:?}: Tri4 {}", b4.stats());
         }
     }
     // Empty slots never hit: a ray through everything sees only used slots.
     let scene = scene_of(&[&soup], &[], &BuildOptions::default());
-    let r1 = raypack::bvh::traverse1::Ray1::new(&Ray::new(Vec3::splat(-3.0), Vec3::ONE));
+    let r1 = raypack::bvh::traverse1::Ray1::<raypack::simd::F32x8>::new(&Ray::new(Vec3::splat(-3.0), Vec3::ONE));
     for n in &scene.bvh8().nodes {
         let (mask, _) = r1.intersect_node(n, f32::INFINITY);
         let used = (0..8).filter(|&i| !n.children[i].is_empty()).fold(0u32, |m, i| m | 1 << i);

@@ -19,9 +19,10 @@
 
 mod common;
 
-use common::{random_rays, scene_of};
+use common::{every_kernel, on_every_isa, random_rays, scene_of};
 use raypack::generate::{grid, uv_sphere};
-use raypack::{BuildOptions, Hit, Ray, RayPacket8, RayPacket16, Scene, Vec3};
+use raypack::kernels::Results;
+use raypack::{BuildOptions, Hit, Ray, Scene, TraversalCounts, Vec3};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -110,51 +111,32 @@ fn hostile_rays(scene: &Scene, base: &[Ray]) -> Vec<(String, Ray)> {
     out
 }
 
-/// Every query on `rays`: `(query name, per-ray hits)`; occlusion as a hit with `t = 0`.
-fn all_queries(scene: &Scene, rays: &[Ray]) -> Vec<(&'static str, Vec<Hit>)> {
+/// Every query on `rays`: brute force, then every kernel of the registry on every ISA tier
+/// (the scalar references first): `(query name, per-ray hits)`; occlusion as a hit with
+/// `t = 0`.
+fn all_queries(scene: &Scene, rays: &[Ray]) -> Vec<(String, Vec<Hit>)> {
     let occ = |b: bool| if b { Hit { t: 0.0, u: 0.0, v: 0.0, prim: 0 } } else { Hit::MISS };
-    let mut out = vec![
-        ("intersect1_reference", rays.iter().map(|r| scene.intersect1_reference(r)).collect()),
-        ("intersect1_brute_force", rays.iter().map(|r| scene.intersect1_brute_force(r)).collect()),
-        ("intersect1", rays.iter().map(|r| scene.intersect1(r)).collect()),
-        ("occluded1_reference", rays.iter().map(|r| occ(scene.occluded1_reference(r))).collect()),
-        ("occluded1", rays.iter().map(|r| occ(scene.occluded1(r))).collect()),
-    ];
-    let (mut i8, mut o8, mut i16, mut o16) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    for chunk in rays.chunks(16) {
-        let (mut p, valid) = RayPacket16::from_rays(chunk);
-        let before = p;
-        scene.intersect16(&mut p, valid);
-        i16.extend((0..chunk.len()).map(|k| p.hit(k)));
-        let bits = scene.occluded16(&before, valid);
-        o16.extend((0..chunk.len()).map(|k| occ(bits >> k & 1 != 0)));
-        for half in chunk.chunks(8) {
-            let (mut p, valid) = RayPacket8::from_rays(half);
-            let before = p;
-            scene.intersect8(&mut p, valid);
-            i8.extend((0..half.len()).map(|k| p.hit(k)));
-            let bits = scene.occluded8(&before, valid);
-            o8.extend((0..half.len()).map(|k| occ(bits >> k & 1 != 0)));
-        }
+    let mut out =
+        vec![("intersect1_brute_force".to_string(), rays.iter().map(|r| scene.intersect1_brute_force(r)).collect())];
+    for (name, results) in every_kernel(scene, rays) {
+        out.push(match results {
+            Results::Hits(h) => (name, h),
+            Results::Occluded(o) => (name, o.into_iter().map(occ).collect()),
+        });
     }
-    out.extend([("intersect8", i8), ("occluded8", o8), ("intersect16", i16), ("occluded16", o16)]);
-    let mut hits = vec![Hit::MISS; rays.len()];
-    scene.intersect_stream(rays, &mut hits);
-    out.push(("intersect_stream", hits));
-    let mut blocked = vec![false; rays.len()];
-    scene.occluded_stream(rays, &mut blocked);
-    out.push(("occluded_stream", blocked.into_iter().map(occ).collect()));
     out
 }
 
 fn check(scene: &Scene, named: &[(String, Ray)]) -> (usize, usize) {
     let rays: Vec<Ray> = named.iter().map(|(_, r)| *r).collect();
     let answers = all_queries(scene, &rays);
+    let find = |name: &str| answers.iter().position(|(q, _)| q == name).expect("a reference kernel");
+    let (reference, reference_occ) = (find("bvh2 reference intersect1"), find("bvh2 reference occluded1"));
     let test = scene.triangle_test().name();
     let (mut invalid, mut hits) = (0, 0);
     for (i, (name, r)) in named.iter().enumerate() {
-        let want = &answers[0].1[i];
-        let want_occ = answers[3].1[i].is_hit();
+        let want = &answers[reference].1[i];
+        let want_occ = answers[reference_occ].1[i].is_hit();
         invalid += !r.is_valid() as usize;
         hits += want.is_hit() as usize;
         for (query, got) in &answers {
@@ -170,13 +152,13 @@ fn check(scene: &Scene, named: &[(String, Ray)]) -> (usize, usize) {
             // looks: only the properties below are checked there, not agreement.
             let noise = r.origin.abs().max_element() > 1e12;
             if noise {
-                if h.is_hit() && !query.starts_with("occluded") {
+                if h.is_hit() && !query.contains("occluded") {
                     assert!(h.t > r.tnear && h.t <= r.tfar && h.t.is_finite(), "{what}: t outside (tnear, tfar]");
                     assert!(h.u.is_finite() && h.v.is_finite(), "{what}: u, v not finite");
                 }
                 continue;
             }
-            if query.starts_with("occluded") {
+            if query.contains("occluded") {
                 assert_eq!(h.is_hit(), want_occ, "{what}: occlusion differs from the reference");
                 continue;
             }
@@ -216,32 +198,27 @@ fn hostile_rays_miss_or_match_the_reference_in_every_query() {
 
 #[test]
 fn nan_rays_do_no_traversal_work() {
-    // Traversal work by count, not time: with the `kernel-stats` feature the kernels count
-    // node visits, leaf visits and block tests per thread.
+    // Traversal work by count, not time: the kernels' own counters, on every ISA tier.
     let scene = scene(false);
     let valid = random_rays(&scene, 4096, 3);
     let nan: Vec<Ray> = valid.iter().map(|r| Ray { dir: Vec3::new(f32::NAN, r.dir.y, r.dir.z), ..*r }).collect();
-    let work = |rays: &[Ray]| {
-        raypack::bvh::counters::take();
+    let work = |scene: &Scene, rays: &[Ray]| {
+        let mut c = TraversalCounts::default();
         for r in rays {
-            std::hint::black_box(scene.intersect1(r));
-            std::hint::black_box(scene.occluded1(r));
+            std::hint::black_box(scene.intersect1_counted(r, &mut c));
+            std::hint::black_box(scene.occluded1_counted(r, &mut c));
         }
         let mut hits = vec![Hit::MISS; rays.len()];
-        scene.intersect_batch(rays, &mut hits);
+        scene.intersect_batch_counted(rays, &mut hits, &mut c);
         let mut occ = vec![false; rays.len()];
-        scene.occluded_batch(rays, &mut occ);
-        raypack::bvh::counters::take()
+        scene.occluded_batch_counted(rays, &mut occ, &mut c);
+        c
     };
-    let (w_valid, w_nan) = (work(&valid), work(&nan));
-    let names = raypack::bvh::counters::NAMES;
-    let show = |w: &[u64]| names.iter().zip(w).map(|(n, c)| format!("{n} {c}")).collect::<Vec<_>>().join(", ");
-    eprintln!("traversal work, 4096 valid rays: {}", show(&w_valid));
-    eprintln!("traversal work, 4096 NaN rays: {}", show(&w_nan));
-    if cfg!(feature = "kernel-stats") {
-        assert!(w_valid[0] > 4096, "valid rays visit nodes");
-        assert!(w_nan.iter().all(|&c| c == 0), "NaN rays are rejected before traversal");
-    } else {
-        eprintln!("SKIPPED work comparison: counters need `--features kernel-stats`");
+    for (isa, scene) in on_every_isa(&scene) {
+        let (w_valid, w_nan) = (work(&scene, &valid), work(&scene, &nan));
+        eprintln!("traversal work [{isa}], 4096 valid rays: {w_valid:?}");
+        eprintln!("traversal work [{isa}], 4096 NaN rays: {w_nan:?}");
+        assert!(w_valid.nodes > 4096 && w_valid.packet_nodes > 0, "valid rays visit nodes");
+        assert_eq!(w_nan, TraversalCounts::default(), "NaN rays are rejected before traversal");
     }
 }

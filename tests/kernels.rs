@@ -2,13 +2,14 @@
 
 use proptest::prelude::*;
 use raypack::bvh::Bvh8Node;
+use raypack::bvh::frustum::Frustum;
 use raypack::bvh::node::NodeRef;
-use raypack::bvh::traverse_packet::{Frustum, PacketRays};
+use raypack::bvh::traverse_packet::PacketRays;
 use raypack::bvh::traverse1::Ray1;
 use raypack::geometry::tri_block::moller_trumbore;
 use raypack::geometry::{
-    Sphere4, Tri4, Tri8, TriBlock, TriangleKernel, WatertightKernel, intersect_sphere, intersect_triangle,
-    intersect_triangle_watertight,
+    Sphere4, Tri4, Tri8, TriBlock, TriangleKernel, TriangleTest, WatertightKernel, intersect_sphere,
+    intersect_triangle, intersect_triangle_watertight,
 };
 use raypack::simd::{F32x4, F32x8, F32x16, Lanes, Vec3x};
 use raypack::{Aabb, Ray, Vec3};
@@ -69,12 +70,12 @@ proptest! {
         let rays: Vec<Ray> = jitter.iter().map(|j| Ray::new(origin + *j * ojit, base + *j * spread)).collect();
         prop_assume!(rays.iter().all(|r| r.is_valid()));
         let p = PacketRays::<F32x16>::new(&rays, 0xFFFF);
-        let Some(fr) = Frustum::new(std::slice::from_ref(&p)) else { return Ok(()) };
+        let Some(fr) = Frustum::<F32x8>::new(std::slice::from_ref(&p)) else { return Ok(()) };
         let mut block = Tri8::EMPTY;
         for (i, t) in tris.iter().enumerate() {
             block.set(i, t[0], t[1], t[2], i as u32);
         }
-        let pass = fr.intersect_triangles(&block);
+        let pass = fr.intersect_triangles::<Tri8, F32x8>(&block, TriangleTest::MollerTrumbore);
         for (i, t) in tris.iter().enumerate() {
             let hit = rays.iter().any(|r| intersect_triangle(r.origin, r.dir, r.tnear, r.tfar, t[0], t[1], t[2]).is_some());
             prop_assert!(!hit || pass >> i & 1 == 1, "triangle {} hit but culled", i);
@@ -86,7 +87,7 @@ proptest! {
     fn node_test_matches_scalar(r in ray(), boxes in prop::collection::vec(aabb(), 0..=8)) {
         prop_assume!(r.is_valid());
         let n = node_with(&boxes);
-        let pre = Ray1::new(&r);
+        let pre = Ray1::<F32x8>::new(&r);
         for tfar in [r.tfar, 1.0] {
             let (mask, _) = pre.intersect_node(&n, tfar.max(r.tnear));
             prop_assert_eq!(mask, pre.intersect_node_scalar(&n, tfar.max(r.tnear)));
@@ -173,7 +174,7 @@ proptest! {
         for (i, (c, rad)) in s.iter().enumerate() {
             b.set(i, *c, *rad, i as u32);
         }
-        let (mask, t) = b.intersect1(r.origin, r.dir, r.tnear, r.tfar);
+        let (mask, t) = b.intersect1::<F32x4>(r.origin, r.dir, r.tnear, r.tfar);
         let twin = b.intersect1_scalar(r.origin, r.dir, r.tnear, r.tfar);
         for (i, (c, rad)) in s.iter().enumerate() {
             let w = intersect_sphere(r.origin, r.dir, r.tnear, r.tfar, *c, *rad);
@@ -195,7 +196,7 @@ proptest! {
         prop_assume!(rays.iter().all(|r| r.is_valid()));
         let p = PacketRays::<F32x16>::new(&rays, 0xFFFF);
         let n = node_with(&boxes);
-        let fr = Frustum::new(std::slice::from_ref(&p));
+        let fr = Frustum::<F32x8>::new(std::slice::from_ref(&p));
         for (i, b) in boxes.iter().enumerate() {
             let (m, _) = p.intersect_box(&n, i);
             let m = m.bitmask();

@@ -15,9 +15,10 @@
 
 mod common;
 
-use common::{scene_of, scenes_dir};
+use common::{every_kernel_where, scene_of, scenes_dir};
 use raypack::generate::{Mesh, uv_sphere};
-use raypack::{BuildOptions, Hit, Ray, RayPacket8, RayPacket16, Scene, Vec3};
+use raypack::kernels::Results;
+use raypack::{BuildOptions, Ray, Scene, Vec3};
 use std::collections::HashMap;
 
 /// Relative distance beyond the target at which a first hit counts as a pass-through.
@@ -103,42 +104,22 @@ fn from_inside(aimed: &[Aimed], center: Vec3) -> Vec<Aimed> {
         .collect()
 }
 
-/// Pass-through counts of every query on `rays`, as `(query name, count)`.
-fn pass_throughs(scene: &Scene, rays: &[Aimed]) -> Vec<(&'static str, usize)> {
+/// Pass-through counts of every kernel of the registry, on every ISA tier, on `rays`, as
+/// `(kernel name, count)`: closest-hit kernels trace the aimed rays, occlusion kernels
+/// segments that end just beyond the target.
+fn pass_throughs(scene: &Scene, rays: &[Aimed]) -> Vec<(String, usize)> {
     let limit = |a: &Aimed| a.t_target * (1.0 + T_TOLERANCE);
-    let passed = |a: &Aimed, h: &Hit| !h.is_hit() || h.t > limit(a);
     let plain: Vec<Ray> = rays.iter().map(|a| a.ray).collect();
     let shadow: Vec<Ray> = rays.iter().map(|a| Ray::segment(a.ray.origin, a.ray.dir, 0.0, limit(a))).collect();
-    let count = |f: &dyn Fn(usize) -> bool| (0..rays.len()).filter(|&i| f(i)).count();
-    let mut out = vec![
-        ("reference", count(&|i| passed(&rays[i], &scene.intersect1_reference(&plain[i])))),
-        ("intersect1", count(&|i| passed(&rays[i], &scene.intersect1(&plain[i])))),
-        ("occluded1", count(&|i| !scene.occluded1(&shadow[i]))),
-    ];
-    let (mut i8, mut o8, mut i16, mut o16) = (0, 0, 0, 0);
-    for (c, chunk) in plain.chunks(16).enumerate() {
-        let base = c * 16;
-        let (mut p, valid) = RayPacket16::from_rays(chunk);
-        scene.intersect16(&mut p, valid);
-        i16 += (0..chunk.len()).filter(|&k| passed(&rays[base + k], &p.hit(k))).count();
-        let (p, valid) = RayPacket16::from_rays(&shadow[base..base + chunk.len()]);
-        o16 += (valid & !scene.occluded16(&p, valid)).count_ones() as usize;
-        for (h, half) in chunk.chunks(8).enumerate() {
-            let b8 = base + h * 8;
-            let (mut p, valid) = RayPacket8::from_rays(half);
-            scene.intersect8(&mut p, valid);
-            i8 += (0..half.len()).filter(|&k| passed(&rays[b8 + k], &p.hit(k))).count();
-            let (p, valid) = RayPacket8::from_rays(&shadow[b8..b8 + half.len()]);
-            o8 += (valid & !scene.occluded8(&p, valid)).count_ones() as usize;
-        }
+    let mut out = Vec::new();
+    for (name, results) in every_kernel_where(scene, &plain, |k| !k.is_occlusion()) {
+        let Results::Hits(h) = results else { unreachable!("closest-hit kernels") };
+        out.push((name, rays.iter().zip(&h).filter(|(a, h)| !h.is_hit() || h.t > limit(a)).count()));
     }
-    out.extend([("intersect8", i8), ("occluded8", o8), ("intersect16", i16), ("occluded16", o16)]);
-    let mut hits = vec![Hit::MISS; rays.len()];
-    scene.intersect_stream(&plain, &mut hits);
-    out.push(("intersect_stream", count(&|i| passed(&rays[i], &hits[i]))));
-    let mut occ = vec![false; rays.len()];
-    scene.occluded_stream(&shadow, &mut occ);
-    out.push(("occluded_stream", count(&|i| !occ[i])));
+    for (name, results) in every_kernel_where(scene, &shadow, |k| k.is_occlusion()) {
+        let Results::Occluded(o) = results else { unreachable!("occlusion kernels") };
+        out.push((name, o.iter().filter(|&&b| !b).count()));
+    }
     out
 }
 

@@ -5,7 +5,8 @@
 //! * [`Bvh2`] is also the scalar reference traversal that faster kernels are tested against.
 //! * [`collapse()`] turns it into the 8-wide [`Bvh8`] ([`Bvh8Node`], SoA leaf blocks) that the
 //!   SIMD kernels of [`traverse1`] (single rays) and [`traverse_packet`] (8/16-ray packets,
-//!   tiles of camera rays) traverse.
+//!   with the [`frustum`] of coherent ones) traverse; [`queries`] holds their entry points,
+//!   instantiated per ISA tier and counting their work through [`counters`].
 
 pub mod array;
 pub mod build_sah;
@@ -13,7 +14,9 @@ pub mod bvh2;
 pub mod bvh8;
 pub mod collapse;
 pub mod counters;
+pub mod frustum;
 pub mod node;
+pub mod queries;
 pub mod stats;
 pub mod traverse1;
 pub mod traverse_packet;
@@ -24,6 +27,7 @@ pub use build_sah::{BuildOptions, BuildPrim, BuildQuality, SplitMethod, build_bv
 pub use bvh2::{Bvh2, Bvh2Node};
 pub use bvh8::{Bvh8, Bvh8Stats, DefaultTriBlock};
 pub use collapse::{CollapseMethod, CollapseOptions, PrimShape, collapse, collapse_for};
+pub use counters::{Counter, NoCount, TraversalCounts, Work};
 pub use node::{Bvh8Node, LeafKind, NodeRef};
 pub use stats::BvhStats;
 

@@ -20,41 +20,46 @@
 //! tables without narrowing the child references.
 //!
 //! Leaves are runs of SoA blocks tested one ray against all M triangles at once
-//! ([`crate::geometry::tri_block`]) with the BVH's [`TriangleKernel`] (Möller–Trumbore or
-//! watertight), chosen once per query.
+//! ([`crate::geometry::tri_block`]) with the BVH's [`TriangleKernel`] `P` (Möller–Trumbore
+//! or watertight), chosen once per query.
+//!
+//! The kernels are generic over the ISA's lanes `I` ([`IsaLanes`]) and a work [`Counter`]
+//! `C`, and `#[inline(always)]`: the entry points of [`crate::bvh::queries`] instantiate
+//! them per ISA tier, triangle test and counter.
 
 use crate::bvh::bvh2::SLAB_WIDEN;
-use crate::bvh::counters::*;
+use crate::bvh::counters::{Counter, Work};
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
 use crate::bvh::{BVH8_STACK, Bvh8};
 use crate::geometry::sphere_block::sphere_lanes;
-use crate::geometry::{MollerTrumboreKernel, TriBlock, TriangleKernel, TriangleTest, WatertightKernel};
+use crate::geometry::{TriBlock, TriangleKernel};
 use crate::ray::{Hit, Ray};
-use crate::simd::{F32x4, F32x8, Lanes, Vec3x};
+use crate::simd::{IsaLanes, Lanes, Vec3x};
 use std::mem::MaybeUninit;
 
-/// Per-ray constants of the single-ray kernels.
+/// Per-ray constants of the single-ray kernels, in lanes `V` of 8 (one per child slot).
 #[derive(Clone, Copy, Debug)]
-pub struct Ray1 {
+pub struct Ray1<V> {
     /// The ray.
     pub ray: Ray,
-    org: Vec3x<F32x8>,
-    inv: Vec3x<F32x8>,
-    tnear: F32x8,
+    org: Vec3x<V>,
+    inv: Vec3x<V>,
+    tnear: V,
     /// Row of the node's bounds holding the near plane of each axis (the far one is `^ 1`).
     near: [usize; 3],
 }
 
-impl Ray1 {
+impl<V: Lanes> Ray1<V> {
     /// Precomputes the slab-test constants of `ray` (which must be valid).
     #[inline(always)]
     pub fn new(ray: &Ray) -> Self {
+        debug_assert_eq!(V::LANES, 8, "one lane per child slot");
         let inv = ray.inv_dir();
         Self {
             ray: *ray,
             org: Vec3x::splat(ray.origin),
             inv: Vec3x::splat(inv),
-            tnear: F32x8::splat(ray.tnear),
+            tnear: V::splat(ray.tnear),
             near: [(inv.x < 0.0) as usize, 2 + (inv.y < 0.0) as usize, 4 + (inv.z < 0.0) as usize],
         }
     }
@@ -70,17 +75,17 @@ impl Ray1 {
     /// from the scene and would eat the 2^-20 relative padding of the node boxes for origins
     /// more than about 16 scene extents away, making hits near node faces go missing.
     #[inline(always)]
-    pub fn intersect_node(&self, n: &Bvh8Node, tfar: f32) -> (u32, F32x8) {
+    pub fn intersect_node(&self, n: &Bvh8Node, tfar: f32) -> (u32, V) {
         let b = &n.bounds;
         let [nx, ny, nz] = self.near;
-        let tnx = (F32x8::load(&b[nx]) - self.org.x) * self.inv.x;
-        let tny = (F32x8::load(&b[ny]) - self.org.y) * self.inv.y;
-        let tnz = (F32x8::load(&b[nz]) - self.org.z) * self.inv.z;
-        let tfx = (F32x8::load(&b[nx ^ 1]) - self.org.x) * self.inv.x;
-        let tfy = (F32x8::load(&b[ny ^ 1]) - self.org.y) * self.inv.y;
-        let tfz = (F32x8::load(&b[nz ^ 1]) - self.org.z) * self.inv.z;
+        let tnx = (V::load(&b[nx]) - self.org.x) * self.inv.x;
+        let tny = (V::load(&b[ny]) - self.org.y) * self.inv.y;
+        let tnz = (V::load(&b[nz]) - self.org.z) * self.inv.z;
+        let tfx = (V::load(&b[nx ^ 1]) - self.org.x) * self.inv.x;
+        let tfy = (V::load(&b[ny ^ 1]) - self.org.y) * self.inv.y;
+        let tfz = (V::load(&b[nz ^ 1]) - self.org.z) * self.inv.z;
         let tn = tnx.vmax(tny).vmax(tnz.vmax(self.tnear));
-        let tf = (tfx.vmin(tfy).vmin(tfz) * F32x8::splat(SLAB_WIDEN)).vmin(F32x8::splat(tfar));
+        let tf = (tfx.vmin(tfy).vmin(tfz) * V::splat(SLAB_WIDEN)).vmin(V::splat(tfar));
         (tn.le(tf).bitmask(), tn)
     }
 
@@ -106,35 +111,25 @@ impl Ray1 {
 }
 
 impl<T: TriBlock> Bvh8<T> {
-    /// Closest hit along `ray` (invalid rays miss). Sphere hits carry `u = v = 0`; the scene
-    /// fills in their surface coordinates.
-    #[inline]
-    pub fn intersect1(&self, ray: &Ray) -> Hit {
-        let mut hit = Hit::MISS;
-        if ray.is_valid() {
-            let mut tfar = ray.tfar;
-            let (r, root) = (Ray1::new(ray), self.root());
-            match self.test {
-                TriangleTest::MollerTrumbore => {
-                    self.intersect1_from::<MollerTrumboreKernel>(&r, root, &mut tfar, &mut hit)
-                }
-                TriangleTest::Watertight => self.intersect1_from::<WatertightKernel>(&r, root, &mut tfar, &mut hit),
-            }
-        }
-        hit
-    }
-
-    /// Closest-hit traversal of the subtree `start`, shrinking `tfar` and updating `hit` as
-    /// closer hits are found (the single-ray fallback of the packet kernels enters here).
-    /// `K` must be the kernel of `self.test`.
-    #[inline]
-    pub fn intersect1_from<K: TriangleKernel>(&self, r: &Ray1, start: NodeRef, tfar_io: &mut f32, hit_io: &mut Hit) {
-        debug_assert_eq!(K::TEST, self.test, "kernel of the block layout");
+    /// Closest-hit traversal of the subtree `start` in ISA `I` with triangle kernel `P`
+    /// (which must be the kernel of `self.test`), shrinking `tfar` and updating `hit` as
+    /// closer hits are found; the packet kernels' single-ray fallback enters here too.
+    /// Sphere hits carry `u = v = 0`; the scene fills in their surface coordinates.
+    #[inline(always)]
+    pub fn intersect1_from<I: IsaLanes, P: TriangleKernel, C: Counter>(
+        &self,
+        r: &Ray1<I::F8>,
+        start: NodeRef,
+        tfar_io: &mut f32,
+        hit_io: &mut Hit,
+        counter: &mut C,
+    ) {
+        debug_assert_eq!(P::TEST, self.test, "kernel of the block layout");
         let mut refs = [const { MaybeUninit::<NodeRef>::uninit() }; BVH8_STACK];
         let mut dists = [const { MaybeUninit::<f32>::uninit() }; BVH8_STACK];
         let mut sp = 0usize;
-        let pre = K::ray1::<T::V>(&r.ray);
-        let tnear = T::V::splat(r.ray.tnear);
+        let pre = P::ray1::<T::Lanes<I>>(&r.ray);
+        let tnear = T::Lanes::<I>::splat(r.ray.tnear);
         let mut tfar = *tfar_io;
         let mut hit = *hit_io;
         let mut cur = start;
@@ -142,12 +137,12 @@ impl<T: TriBlock> Bvh8<T> {
             'descend: {
                 while !cur.is_leaf() {
                     let node = &self.nodes[cur.node_index()];
-                    count!(NODES, 1);
+                    counter.add(Work::Nodes, 1);
                     let (mut mask, dist) = r.intersect_node(node, tfar);
                     if mask == 0 {
                         break 'descend;
                     }
-                    let d = dist.as_array();
+                    let d = dist.to_array();
                     let i0 = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
                     if mask == 0 {
@@ -204,7 +199,7 @@ impl<T: TriBlock> Bvh8<T> {
                     // SAFETY: entry sp was written above.
                     cur = unsafe { refs[sp].assume_init() };
                 }
-                self.intersect_leaf::<K>(cur, r, &pre, tnear, &mut tfar, &mut hit);
+                self.intersect_leaf1::<I, P, C>(cur, r, &pre, tnear, &mut tfar, &mut hit, counter);
             }
             loop {
                 if sp == 0 {
@@ -223,23 +218,26 @@ impl<T: TriBlock> Bvh8<T> {
         }
     }
 
+    /// The closest hit in `leaf` nearer than `tfar` (which it shrinks), into `hit`.
+    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn intersect_leaf<K: TriangleKernel>(
+    fn intersect_leaf1<I: IsaLanes, P: TriangleKernel, C: Counter>(
         &self,
         leaf: NodeRef,
-        r: &Ray1,
-        pre: &K::Ray1<T::V>,
-        tnear: T::V,
+        r: &Ray1<I::F8>,
+        pre: &P::Ray1<T::Lanes<I>>,
+        tnear: T::Lanes<I>,
         tfar: &mut f32,
         hit: &mut Hit,
+        counter: &mut C,
     ) {
         let range = leaf.blocks();
-        count!(LEAVES, 1);
-        count!(BLOCKS, leaf.block_count());
+        counter.add(Work::Leaves, 1);
+        counter.add(Work::Blocks, leaf.block_count() as u32);
         match leaf.kind() {
             LeafKind::Triangles => {
                 for block in &self.tris[range] {
-                    let h = K::block(block, pre, tnear, T::V::splat(*tfar));
+                    let h = P::block(block, pre, tnear, T::Lanes::<I>::splat(*tfar));
                     if let Some(lane) = h.closest() {
                         *tfar = h.t.lane(lane);
                         *hit = Hit { t: *tfar, u: h.u.lane(lane), v: h.v.lane(lane), prim: block.prim(lane) };
@@ -251,15 +249,12 @@ impl<T: TriBlock> Bvh8<T> {
                     let (m, t) = sphere_lanes(
                         &Vec3x::splat(r.ray.origin),
                         &Vec3x::splat(r.ray.dir),
-                        F32x4::splat(r.ray.tnear),
-                        F32x4::splat(*tfar),
+                        I::F4::splat(r.ray.tnear),
+                        I::F4::splat(*tfar),
                         &block.centers(),
-                        F32x4::load(&block.radius),
+                        I::F4::load(&block.radius),
                     );
-                    let mut bits = m.bitmask();
-                    while bits != 0 {
-                        let lane = bits.trailing_zeros() as usize;
-                        bits &= bits - 1;
+                    for lane in crate::simd::bits(m.bitmask()) {
                         if t.lane(lane) <= *tfar {
                             *tfar = t.lane(lane);
                             *hit = Hit { t: *tfar, u: 0.0, v: 0.0, prim: block.prim[lane] };
@@ -270,34 +265,27 @@ impl<T: TriBlock> Bvh8<T> {
         }
     }
 
-    /// True when anything lies in `(ray.tnear, ray.tfar]` (invalid rays are never occluded).
-    #[inline]
-    pub fn occluded1(&self, ray: &Ray) -> bool {
-        ray.is_valid()
-            && match self.test {
-                TriangleTest::MollerTrumbore => {
-                    self.occluded1_from::<MollerTrumboreKernel>(&Ray1::new(ray), self.root())
-                }
-                TriangleTest::Watertight => self.occluded1_from::<WatertightKernel>(&Ray1::new(ray), self.root()),
-            }
-    }
-
-    /// Any-hit traversal of the subtree `start`. Children are visited in slot order (no
-    /// sorting): an occluder anywhere ends the query, so ordering buys little. `K` must be
-    /// the kernel of `self.test`.
-    #[inline]
-    pub fn occluded1_from<K: TriangleKernel>(&self, r: &Ray1, start: NodeRef) -> bool {
-        debug_assert_eq!(K::TEST, self.test, "kernel of the block layout");
+    /// Any-hit traversal of the subtree `start` in ISA `I` with triangle kernel `P` (which
+    /// must be the kernel of `self.test`). Children are visited in slot order (no sorting):
+    /// an occluder anywhere ends the query, so ordering buys little.
+    #[inline(always)]
+    pub fn occluded1_from<I: IsaLanes, P: TriangleKernel, C: Counter>(
+        &self,
+        r: &Ray1<I::F8>,
+        start: NodeRef,
+        counter: &mut C,
+    ) -> bool {
+        debug_assert_eq!(P::TEST, self.test, "kernel of the block layout");
         let mut stack = [const { MaybeUninit::<NodeRef>::uninit() }; BVH8_STACK];
         let mut sp = 0usize;
-        let pre = K::ray1::<T::V>(&r.ray);
-        let (tnear, tfar) = (T::V::splat(r.ray.tnear), T::V::splat(r.ray.tfar));
+        let pre = P::ray1::<T::Lanes<I>>(&r.ray);
+        let (tnear, tfar) = (T::Lanes::<I>::splat(r.ray.tnear), T::Lanes::<I>::splat(r.ray.tfar));
         let mut cur = start;
         loop {
             'descend: {
                 while !cur.is_leaf() {
                     let node = &self.nodes[cur.node_index()];
-                    count!(NODES, 1);
+                    counter.add(Work::Nodes, 1);
                     let (mut mask, _) = r.intersect_node(node, r.ray.tfar);
                     if mask == 0 {
                         break 'descend;
@@ -313,19 +301,21 @@ impl<T: TriBlock> Bvh8<T> {
                     cur = node.children[first];
                 }
                 let range = cur.blocks();
-                count!(LEAVES, 1);
+                counter.add(Work::Leaves, 1);
                 match cur.kind() {
                     LeafKind::Triangles => {
                         for block in &self.tris[range] {
-                            count!(BLOCKS, 1);
-                            if K::block(block, &pre, tnear, tfar).mask != 0 {
+                            counter.add(Work::Blocks, 1);
+                            if P::block(block, &pre, tnear, tfar).mask != 0 {
                                 return true;
                             }
                         }
                     }
                     LeafKind::Spheres => {
                         for block in &self.spheres[range] {
-                            if block.intersect1(r.ray.origin, r.ray.dir, r.ray.tnear, r.ray.tfar).0 != 0 {
+                            counter.add(Work::Blocks, 1);
+                            let (m, _) = block.intersect1::<I::F4>(r.ray.origin, r.ray.dir, r.ray.tnear, r.ray.tfar);
+                            if m != 0 {
                                 return true;
                             }
                         }

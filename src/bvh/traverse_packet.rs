@@ -16,7 +16,7 @@
 //!   single-ray kernel ([`crate::bvh::traverse1`]), so incoherent packets degrade to single
 //!   rays instead of dragging empty lanes along.
 //! * Leaves test all wanted rays against one broadcast triangle at a time, skipping the
-//!   triangles whose bounding boxes the frustum misses (8 boxes per test, built from the
+//!   triangles whose bounding boxes the frustum ([`Frustum`]) misses (8 boxes per test, built from the
 //!   block's `v0`, `e1`, `e2` and padded like node boxes). On camera rays (1 thread, best of
 //!   9, Mrays/s) this took the CS184 CBbunny from 57 to 81 (its Cornell-box walls share one
 //!   13-triangle leaf whose box is the whole room), the beetle from 76 to 86, the dragon from
@@ -24,7 +24,11 @@
 //!
 //! Every lane gets exactly the hit the single-ray kernel gives it: the box tests are
 //! conservative and the triangle test is the same bit-exact one (Möller–Trumbore or
-//! watertight, the BVH's [`TriangleKernel`], chosen once per packet).
+//! watertight, the BVH's [`TriangleKernel`] `P`, chosen once per packet).
+//!
+//! The kernels are generic over the packet's lanes `V` (K = `V::LANES` rays), the ISA's lanes
+//! `I` (8-lane node and frustum tests, the single-ray fallback) and a work [`Counter`] `C`;
+//! [`crate::bvh::queries`] instantiates them per ISA tier.
 //!
 //! Tried and replaced (Stanford dragon, 871k triangles, 1024 x 768 camera rays in 4 x 4 tiles,
 //! 1 thread, best of 7, Mrays/s; Embree's `rtcIntersect16` with the coherent flag: 27.9):
@@ -45,14 +49,15 @@
 //!   with: 8.12 (Embree's best, `rtcOccluded16`: 5.18).
 
 use crate::bvh::bvh2::SLAB_WIDEN;
-use crate::bvh::counters::*;
+use crate::bvh::counters::{Counter, Work};
+use crate::bvh::frustum::Frustum;
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
 use crate::bvh::traverse1::Ray1;
 use crate::bvh::{BVH8_STACK, Bvh8};
 use crate::geometry::sphere_block::sphere_lanes;
-use crate::geometry::{MollerTrumboreKernel, TriBlock, TriangleKernel, TriangleTest, WatertightKernel};
+use crate::geometry::{TriBlock, TriangleKernel, TriangleTest};
 use crate::ray::{Hit, Ray};
-use crate::simd::{F32x8, Lanes, Vec3x};
+use crate::simd::{IsaLanes, Lanes, Transpose8, Vec3x};
 use std::mem::MaybeUninit;
 
 /// K rays in lane form with their running closest hits.
@@ -78,20 +83,34 @@ pub struct PacketRays<V> {
     pub active: V,
 }
 
+/// `crate::math::safe_recip` lane-wise: components below 1e-18 in magnitude map to 1e18 of
+/// the same sign. (Kernels use small functions, not closures: a closure is compiled without
+/// the ISA's target features and, holding SIMD code, is not inlined into the kernel.)
+#[inline(always)]
+fn safe_recip<V: Lanes>(x: V) -> V {
+    x.abs().lt(V::splat(1e-18)).select(V::splat(1.0 / 1e-18f32).copysign(x), V::splat(1.0) / x)
+}
+
 #[inline(always)]
 fn none_bits<V: Lanes>() -> V {
     V::splat(f32::from_bits(Hit::NONE))
 }
 
 impl<V: Lanes> PacketRays<V> {
-    /// Lane form of `rays` (K = `V::LANES` entries); lanes whose bit is clear in `mask`, and
-    /// invalid rays, are inactive.
+    /// Lane form of `rays` (K = `V::LANES` entries), transposed with the 8 lanes `W`; lanes
+    /// whose bit is clear in `mask`, and invalid rays, are inactive.
     #[inline(always)]
-    pub fn new(rays: &[Ray], mask: u32) -> Self {
-        let rows = crate::ray::transpose_rays(&rays[..rays.len().min(V::LANES)]);
+    pub fn new_in<W: Transpose8>(rays: &[Ray], mask: u32) -> Self {
+        let rows = crate::ray::transpose_rays_in::<W>(&rays[..rays.len().min(V::LANES)]);
         let valid = if rays.len() >= V::LANES { mask } else { mask & ((1u32 << rays.len()) - 1) };
         let [ox, oy, oz, dx, dy, dz, tn, tf] = &rows;
         Self::from_rows([ox, oy, oz], [dx, dy, dz], tn, tf, valid)
+    }
+
+    /// [`PacketRays::new_in`] with the baseline ISA's transpose.
+    #[inline(always)]
+    pub fn new(rays: &[Ray], mask: u32) -> Self {
+        Self::new_in::<crate::simd::F32x8>(rays, mask)
     }
 
     /// Stores the hit rows (`t` = current `tfar`, `u`, `v`, primitive id) of all lanes.
@@ -118,24 +137,13 @@ impl<V: Lanes> PacketRays<V> {
         let zero = V::splat(0.0);
         let finite = org.x.is_finite() & org.y.is_finite() & org.z.is_finite();
         let finite = finite & dir.x.is_finite() & dir.y.is_finite() & dir.z.is_finite();
-        let abs = |x: V| x & !V::splat(-0.0);
-        let nonzero = abs(dir.x).vmax(abs(dir.y)).vmax(abs(dir.z)).ge(V::splat(Ray::MIN_DIRECTION));
+        let nonzero = dir.x.abs().vmax(dir.y.abs()).vmax(dir.z.abs()).ge(V::splat(Ray::MIN_DIRECTION));
         let interval = tnear.ge(zero) & tnear.le(tfar);
-        let mut bits = [0.0f32; 16];
-        for (i, b) in bits.iter_mut().enumerate().take(V::LANES) {
-            *b = f32::from_bits(if mask >> i & 1 != 0 { u32::MAX } else { 0 });
-        }
-        let active = V::load(&bits) & finite & nonzero & interval;
-        // `safe_recip` lane-wise: tiny components map to a huge value of the same sign.
-        let recip = |x: V| {
-            let tiny = V::splat(1e-18);
-            let abs = x & !V::splat(-0.0);
-            abs.lt(tiny).select(V::splat(1.0 / 1e-18f32).copysign(x), V::splat(1.0) / x)
-        };
+        let active = V::from_bitmask(mask) & finite & nonzero & interval;
         Self {
             org,
             dir,
-            inv: Vec3x { x: recip(dir.x), y: recip(dir.y), z: recip(dir.z) },
+            inv: Vec3x { x: safe_recip(dir.x), y: safe_recip(dir.y), z: safe_recip(dir.z) },
             tnear,
             tfar,
             u: zero,
@@ -170,22 +178,21 @@ impl<V: Lanes> PacketRays<V> {
 
     /// Writes lane `i`'s hit (from a single-ray fallback).
     #[inline(always)]
-    fn set_lane(&mut self, i: usize, tfar: f32, hit: &Hit) {
-        let mut a = [[0.0f32; 16]; 4];
-        self.tfar.store(&mut a[0]);
-        self.u.store(&mut a[1]);
-        self.v.store(&mut a[2]);
-        self.prim.store(&mut a[3]);
-        a[0][i] = tfar;
-        if hit.is_hit() {
-            a[1][i] = hit.u;
-            a[2][i] = hit.v;
-            a[3][i] = f32::from_bits(hit.prim);
-        }
-        self.tfar = V::load(&a[0]);
-        self.u = V::load(&a[1]);
-        self.v = V::load(&a[2]);
-        self.prim = V::load(&a[3]);
+    fn set_lane(&mut self, i: usize, hit: &Hit) {
+        let m = V::from_bitmask(1 << i);
+        self.tfar = m.select(V::splat(hit.t), self.tfar);
+        self.u = m.select(V::splat(hit.u), self.u);
+        self.v = m.select(V::splat(hit.v), self.v);
+        self.prim = m.select(V::splat(f32::from_bits(hit.prim)), self.prim);
+    }
+
+    /// Keeps the hits `(t, u, v)` of triangle or sphere `prim` in the lanes of mask `m`.
+    #[inline(always)]
+    fn keep_hits(&mut self, m: V, t: V, u: V, v: V, prim: u32) {
+        self.tfar = m.select(t, self.tfar);
+        self.u = m.select(u, self.u);
+        self.v = m.select(v, self.v);
+        self.prim = m.select(V::splat(f32::from_bits(prim)), self.prim);
     }
 
     /// Per-lane slab test against box `i` of `node`: `(hit lanes, entry distances)`.
@@ -203,84 +210,75 @@ impl<V: Lanes> PacketRays<V> {
         (tn.le(tf), tn)
     }
 
-    /// Tests the `active` lanes against the spheres of sphere leaf `leaf`, keeping the
-    /// closest hits.
+    /// The lanes of `active` (bit mask) against the primitives of `leaf`, keeping the closest
+    /// hits: all wanted rays against one (broadcast) primitive at a time, skipping the
+    /// triangles the frustum `fr` misses.
+    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn intersect_spheres<T: TriBlock>(&mut self, bvh: &Bvh8<T>, leaf: NodeRef, active: V) {
-        let range = leaf.blocks();
-        for (k, block) in bvh.spheres[range].iter().enumerate() {
-            for lane in 0..leaf.lanes_of_block(k, 4) {
-                let c = Vec3x::splat(block.center(lane));
-                let (m, t) =
-                    sphere_lanes(&self.org, &self.dir, self.tnear, self.tfar, &c, V::splat(block.radius[lane]));
-                let m = m & active;
-                if m.bitmask() != 0 {
-                    self.tfar = m.select(t, self.tfar);
-                    self.u = m.select(V::splat(0.0), self.u);
-                    self.v = m.select(V::splat(0.0), self.v);
-                    self.prim = m.select(V::splat(f32::from_bits(block.prim[lane])), self.prim);
-                }
-            }
-        }
-    }
-
-    /// Tests the lanes of `active` (bit mask) against the primitives of `leaf`, keeping the
-    /// closest hits: ray by ray (each against a whole block) when fewer rays than triangles
-    /// are active, triangle by triangle (all rays against one) otherwise.
-    #[inline(always)]
-    fn intersect_leaf_bits<T: TriBlock, K: TriangleKernel>(
+    fn intersect_leaf<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
         &mut self,
         bvh: &Bvh8<T>,
         leaf: NodeRef,
         active: u32,
-        fr: Option<&Frustum>,
-        pre: &K::RayK<V>,
+        fr: Option<&Frustum<I::F8>>,
+        pre: &P::RayK<V>,
+        counter: &mut C,
     ) {
+        let act = V::from_bitmask(active);
+        let range = leaf.blocks();
         if leaf.kind() == LeafKind::Spheres {
-            self.intersect_spheres(bvh, leaf, V::from_bitmask(active));
+            for (k, block) in bvh.spheres[range].iter().enumerate() {
+                for lane in 0..leaf.lanes_of_block(k, 4) {
+                    let c = Vec3x::splat(block.center(lane));
+                    let (m, t) =
+                        sphere_lanes(&self.org, &self.dir, self.tnear, self.tfar, &c, V::splat(block.radius[lane]));
+                    let m = m & act;
+                    if m.bitmask() != 0 {
+                        let zero = V::splat(0.0);
+                        self.keep_hits(m, t, zero, zero, block.prim[lane]);
+                    }
+                }
+            }
             return;
         }
-        let range = leaf.blocks();
-        let act = V::from_bitmask(active);
         for (k, block) in bvh.tris[range].iter().enumerate() {
-            let todo = lanes_to_test::<T, K>(leaf, k, block, fr);
-            for lane in crate::simd::bits(todo) {
-                let (m, t, u, v) = K::broadcast(&block.lane_rows(lane), pre, self.tnear, self.tfar);
+            for lane in crate::simd::bits(lanes_to_test::<I, T, P, C>(leaf, k, block, fr, counter)) {
+                let (m, t, u, v) = P::broadcast(&block.lane_rows(lane), pre, self.tnear, self.tfar);
                 let m = m & act;
                 if m.bitmask() != 0 {
-                    self.tfar = m.select(t, self.tfar);
-                    self.u = m.select(u, self.u);
-                    self.v = m.select(v, self.v);
-                    self.prim = m.select(V::splat(f32::from_bits(block.prim(lane))), self.prim);
+                    self.keep_hits(m, t, u, v, block.prim(lane));
                 }
             }
         }
     }
 
-    /// The lanes of `active` (bit mask) blocked by anything in `leaf`, as a bit mask.
+    /// The lanes of `active` (bit mask) blocked by anything in `leaf`, as a bit mask: all
+    /// wanted rays against one (broadcast) primitive at a time, skipping the triangles the
+    /// frustum `fr` misses, until every wanted ray is blocked.
+    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn occluded_leaf_bits<T: TriBlock, K: TriangleKernel>(
+    fn occluded_leaf<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
         &self,
         bvh: &Bvh8<T>,
         leaf: NodeRef,
         active: u32,
         cache: &mut OccluderCache,
-        fr: Option<&Frustum>,
-        pre: &K::RayK<V>,
+        fr: Option<&Frustum<I::F8>>,
+        pre: &P::RayK<V>,
+        counter: &mut C,
     ) -> u32 {
         let mut occ = 0u32;
         let range = leaf.blocks();
         match leaf.kind() {
             LeafKind::Triangles => {
                 for (k, block) in bvh.tris[range].iter().enumerate() {
-                    let todo = lanes_to_test::<T, K>(leaf, k, block, fr);
-                    for lane in crate::simd::bits(todo) {
+                    for lane in crate::simd::bits(lanes_to_test::<I, T, P, C>(leaf, k, block, fr, counter)) {
                         let rows = block.lane_rows(lane);
-                        let (m, ..) = K::broadcast(&rows, pre, self.tnear, self.tfar);
+                        let (m, ..) = P::broadcast(&rows, pre, self.tnear, self.tfar);
                         let blocked = m.bitmask() & active;
                         if blocked != 0 {
                             occ |= blocked;
-                            cache.tri = Some((K::TEST, rows));
+                            cache.tri = Some((P::TEST, rows));
                             if active & !occ == 0 {
                                 return occ;
                             }
@@ -303,35 +301,30 @@ impl<V: Lanes> PacketRays<V> {
     }
 }
 
-/// Hybrid closest-hit traversal of the active lanes of `rays`.
+/// Hybrid closest-hit traversal of the active lanes of `rays`, in ISA `I` with triangle
+/// kernel `P` (which must be the kernel of `bvh.test`).
 ///
 /// The stack holds, per entry, the lanes that hit the subtree's box and a lower bound of
 /// their entry distances; a popped entry keeps only the lanes whose closest hit so far lies
 /// beyond that bound. When the packet's direction signs agree, a frustum test first picks the
 /// children any ray could hit (and gives the distance bound); only those get the per-lane
 /// test. Hit children are visited nearest first (by that bound). Subtrees wanted by at most
-/// `threshold` lanes are finished lane by lane with the single-ray kernel; leaves are tested
-/// ray by ray or triangle by triangle, whichever is fewer tests.
-pub fn intersect_hybrid<V: Lanes, T: TriBlock>(bvh: &Bvh8<T>, rays: &mut PacketRays<V>, threshold: usize) {
-    match bvh.test {
-        TriangleTest::MollerTrumbore => intersect_hybrid_with::<V, T, MollerTrumboreKernel>(bvh, rays, threshold),
-        TriangleTest::Watertight => intersect_hybrid_with::<V, T, WatertightKernel>(bvh, rays, threshold),
-    }
-}
-
-/// [`intersect_hybrid`] with triangle kernel `K` (which must be the kernel of `bvh.test`).
-pub fn intersect_hybrid_with<V: Lanes, T: TriBlock, K: TriangleKernel>(
+/// `threshold` lanes are finished lane by lane with the single-ray kernel; leaves test all
+/// wanted rays against one triangle at a time.
+#[inline(always)]
+pub fn intersect_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
     bvh: &Bvh8<T>,
     rays: &mut PacketRays<V>,
     threshold: usize,
+    counter: &mut C,
 ) {
-    debug_assert_eq!(K::TEST, bvh.test, "kernel of the block layout");
+    debug_assert_eq!(P::TEST, bvh.test, "kernel of the block layout");
     let all = rays.active_mask();
     if all == 0 {
         return;
     }
-    let pre = K::ray_k(&rays.org, &rays.dir);
-    let frustum = Frustum::new(std::slice::from_ref(rays));
+    let pre = P::ray_k(&rays.org, &rays.dir);
+    let frustum = Frustum::<I::F8>::new(std::slice::from_ref(rays));
     let inf = V::splat(f32::INFINITY);
     let mut refs = [const { MaybeUninit::<NodeRef>::uninit() }; BVH8_STACK];
     let mut masks = [const { MaybeUninit::<u32>::uninit() }; BVH8_STACK];
@@ -342,32 +335,32 @@ pub fn intersect_hybrid_with<V: Lanes, T: TriBlock, K: TriangleKernel>(
     loop {
         'descend: loop {
             if active.count_ones() as usize <= threshold {
-                count!(FALLBACK_RAYS, active.count_ones());
+                counter.add(Work::FallbackRays, active.count_ones());
                 for i in crate::simd::bits(active) {
                     let r = rays.ray(i);
                     let mut tfar = r.tfar;
                     let mut hit = Hit::MISS;
-                    bvh.intersect1_from::<K>(&Ray1::new(&r), cur, &mut tfar, &mut hit);
+                    bvh.intersect1_from::<I, P, C>(&Ray1::new(&r), cur, &mut tfar, &mut hit, counter);
                     if hit.is_hit() {
-                        rays.set_lane(i, tfar, &hit);
+                        rays.set_lane(i, &hit);
                     }
                 }
                 break 'descend;
             }
             if cur.is_leaf() {
-                rays.intersect_leaf_bits::<T, K>(bvh, cur, active, frustum.as_ref(), &pre);
+                rays.intersect_leaf::<I, T, P, C>(bvh, cur, active, frustum.as_ref(), &pre, counter);
                 break 'descend;
             }
             let node = &bvh.nodes[cur.node_index()];
-            count!(HYBRID_NODES, 1);
+            counter.add(Work::PacketNodes, 1);
             let (candidates, fdist) = match &frustum {
                 Some(f) => f.intersect_node(node),
                 None => {
                     let used = node.children.iter().take_while(|c| !c.is_empty()).count();
-                    ((1u32 << used) - 1, F32x8::splat(0.0))
+                    ((1u32 << used) - 1, I::F8::splat(0.0))
                 }
             };
-            let fd = fdist.as_array();
+            let fd = fdist.to_array();
             let mut next = NodeRef::EMPTY;
             let mut next_active = 0;
             let mut next_dist = f32::INFINITY;
@@ -452,7 +445,7 @@ pub fn intersect_hybrid_with<V: Lanes, T: TriBlock, K: TriangleKernel>(
 /// against 57.2 without, beetle 76.0 against 76.1, dragon 32.3 against 32.4 Mrays/s.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct OccluderCache {
-    /// The stored rows of the last occluder, and the layout they are in.
+    /// The stored vectors of the last occluder, and the layout they are in.
     tri: Option<(TriangleTest, [crate::math::Vec3; 3])>,
 }
 
@@ -462,64 +455,58 @@ const TRIANGLE_CULL: bool = true;
 /// Bit mask of the lanes of `block` (block `k` of `leaf`) a packet tests: the used lanes,
 /// less the triangles the frustum `fr` misses (when culling applies to a block this full).
 #[inline(always)]
-fn lanes_to_test<T: TriBlock, K: TriangleKernel>(leaf: NodeRef, k: usize, block: &T, fr: Option<&Frustum>) -> u32 {
+fn lanes_to_test<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
+    leaf: NodeRef,
+    k: usize,
+    block: &T,
+    fr: Option<&Frustum<I::F8>>,
+    counter: &mut C,
+) -> u32 {
     let lanes = leaf.lanes_of_block(k, T::M);
     let mut todo = (1u32 << lanes) - 1;
     if TRIANGLE_CULL && lanes >= 4 {
         if let Some(f) = fr {
-            todo &= f.intersect_triangles_in(block, K::TEST);
+            todo &= f.intersect_triangles::<T, T::Lanes<I>>(block, P::TEST);
         }
     }
-    count!(PACKET_TRI_TESTS, todo.count_ones());
+    counter.add(Work::PacketTriangles, todo.count_ones());
     todo
 }
 
 /// Test a node's leaf children before descending into its inner children (any hit only).
 const LEAVES_FIRST: bool = true;
 
-/// Hybrid any-hit traversal; returns the bit mask of occluded lanes.
+/// Hybrid any-hit traversal in ISA `I` with triangle kernel `P` (which must be the kernel of
+/// `bvh.test`); returns the bit mask of occluded lanes.
 ///
 /// Occlusion needs no distances, so the stack holds lane masks (which rays want a subtree)
 /// rather than per-lane entry distances. When the packet's direction signs agree, a frustum
 /// test first picks the children any ray could hit, and only those get the per-lane test.
-/// Subtrees wanted by at most `threshold` rays are finished ray by ray; leaves wanted by fewer
-/// rays than they hold triangles are tested ray by ray (one ray against the whole block),
-/// others triangle by triangle (all rays against one triangle).
-pub fn occluded_hybrid<V: Lanes, T: TriBlock>(
+/// Subtrees wanted by at most `threshold` rays are finished ray by ray; leaves test all
+/// wanted rays against one triangle at a time, leaf children of a node before its inner ones.
+#[inline(always)]
+pub fn occluded_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
     bvh: &Bvh8<T>,
     rays: &PacketRays<V>,
     threshold: usize,
     cache: &mut OccluderCache,
+    counter: &mut C,
 ) -> u32 {
-    match bvh.test {
-        TriangleTest::MollerTrumbore => occluded_hybrid_with::<V, T, MollerTrumboreKernel>(bvh, rays, threshold, cache),
-        TriangleTest::Watertight => occluded_hybrid_with::<V, T, WatertightKernel>(bvh, rays, threshold, cache),
-    }
-}
-
-/// [`occluded_hybrid`] with triangle kernel `K` (which must be the kernel of `bvh.test`).
-pub fn occluded_hybrid_with<V: Lanes, T: TriBlock, K: TriangleKernel>(
-    bvh: &Bvh8<T>,
-    rays: &PacketRays<V>,
-    threshold: usize,
-    cache: &mut OccluderCache,
-) -> u32 {
-    debug_assert_eq!(K::TEST, bvh.test, "kernel of the block layout");
+    debug_assert_eq!(P::TEST, bvh.test, "kernel of the block layout");
     let all = rays.active_mask();
     let mut occluded = 0u32;
     if all == 0 {
         return 0;
     }
-    let pre = K::ray_k(&rays.org, &rays.dir);
-    if let Some((test, rows)) = cache.tri.filter(|c| c.0 == K::TEST) {
-        debug_assert_eq!(test, K::TEST);
-        let (m, ..) = K::broadcast(&rows, &pre, rays.tnear, rays.tfar);
+    let pre = P::ray_k(&rays.org, &rays.dir);
+    if let Some((_, rows)) = cache.tri.filter(|c| c.0 == P::TEST) {
+        let (m, ..) = P::broadcast(&rows, &pre, rays.tnear, rays.tfar);
         occluded = m.bitmask() & all;
         if occluded == all {
             return occluded;
         }
     }
-    let frustum = Frustum::new(std::slice::from_ref(rays));
+    let frustum = Frustum::<I::F8>::new(std::slice::from_ref(rays));
     let mut refs = [const { MaybeUninit::<NodeRef>::uninit() }; BVH8_STACK];
     let mut masks = [const { MaybeUninit::<u32>::uninit() }; BVH8_STACK];
     let mut sp = 0usize;
@@ -528,25 +515,24 @@ pub fn occluded_hybrid_with<V: Lanes, T: TriBlock, K: TriangleKernel>(
     loop {
         'descend: loop {
             if active.count_ones() as usize <= threshold {
-                count!(FALLBACK_RAYS, active.count_ones());
+                counter.add(Work::FallbackRays, active.count_ones());
                 for i in crate::simd::bits(active) {
-                    if bvh.occluded1_from::<K>(&Ray1::new(&rays.ray(i)), cur) {
+                    if bvh.occluded1_from::<I, P, C>(&Ray1::new(&rays.ray(i)), cur, counter) {
                         occluded |= 1 << i;
                     }
                 }
                 break 'descend;
             }
             if cur.is_leaf() {
-                occluded |= rays.occluded_leaf_bits::<T, K>(bvh, cur, active, cache, frustum.as_ref(), &pre);
+                occluded |= rays.occluded_leaf::<I, T, P, C>(bvh, cur, active, cache, frustum.as_ref(), &pre, counter);
                 break 'descend;
             }
             let node = &bvh.nodes[cur.node_index()];
-            count!(HYBRID_NODES, 1);
+            counter.add(Work::PacketNodes, 1);
             let candidates = match &frustum {
                 Some(f) => f.intersect_node(node).0,
-                None => node.children.iter().take_while(|c| !c.is_empty()).count() as u32,
+                None => (1u32 << node.children.iter().take_while(|c| !c.is_empty()).count()) - 1,
             };
-            let candidates = if frustum.is_some() { candidates } else { (1u32 << candidates) - 1 };
             let mut next = NodeRef::EMPTY;
             let mut next_active = 0;
             let mut leaves = 0u32;
@@ -577,8 +563,15 @@ pub fn occluded_hybrid_with<V: Lanes, T: TriBlock, K: TriangleKernel>(
             for i in crate::simd::bits(leaves) {
                 let m = leaf_masks[i] & !occluded;
                 if m != 0 {
-                    occluded |=
-                        rays.occluded_leaf_bits::<T, K>(bvh, node.children[i], m, cache, frustum.as_ref(), &pre);
+                    occluded |= rays.occluded_leaf::<I, T, P, C>(
+                        bvh,
+                        node.children[i],
+                        m,
+                        cache,
+                        frustum.as_ref(),
+                        &pre,
+                        counter,
+                    );
                     if all & !occluded == 0 {
                         return occluded;
                     }
@@ -608,154 +601,5 @@ pub fn occluded_hybrid_with<V: Lanes, T: TriBlock, K: TriangleKernel>(
                 break;
             }
         }
-    }
-}
-
-/// The bounds, by interval arithmetic, of a tile of coherent rays whose direction signs
-/// agree on every axis: one 8-wide box test then answers "could any ray of the tile hit this
-/// child" for all of them (conservatively: see [`Frustum::new`]).
-#[derive(Clone, Copy, Debug)]
-pub struct Frustum {
-    near: [usize; 3],
-    near_org: Vec3x<F32x8>,
-    far_org: Vec3x<F32x8>,
-    near_rdir: Vec3x<F32x8>,
-    far_rdir: Vec3x<F32x8>,
-    tnear: F32x8,
-    /// Largest `tfar` of the tile's active rays.
-    pub tfar: f32,
-    /// The same bounds as scalars `[near_org, far_org, near_rdir, far_rdir]` per axis, and
-    /// `tnear`, for tests at other widths.
-    scalars: [[f32; 3]; 4],
-    tnear1: f32,
-}
-
-impl Frustum {
-    /// The frustum of the active lanes of `packets`, or `None` when no lane is active or the
-    /// direction signs differ on some axis.
-    ///
-    /// Per axis with reciprocal directions in `[i_lo, i_hi]` (same sign) and origins in
-    /// `[o_lo, o_hi]`: the near plane `n` is entered no earlier than `(n - o') · i'` where
-    /// `o'` is the origin bound on the far side (`o_hi` for positive directions) and `i'` the
-    /// reciprocal of smallest magnitude; the far plane `f` is left no later than
-    /// `(f - o'') · i''` with the other bounds. Rounding is monotone in each operand, so these
-    /// bound the per-ray values computed by [`PacketRays::intersect_box`] and
-    /// [`Ray1::intersect_node`] in floating point too. A negative bound is not tight, but the
-    /// interval starts at `tnear >= 0`, which makes it harmless.
-    pub fn new<V: Lanes>(packets: &[PacketRays<V>]) -> Option<Self> {
-        let (pinf, ninf) = (V::splat(f32::INFINITY), V::splat(f32::NEG_INFINITY));
-        let mut lo = [pinf; 7];
-        let mut hi = [ninf; 7];
-        let mut any = false;
-        for p in packets {
-            if p.active.bitmask() == 0 {
-                continue;
-            }
-            any = true;
-            let rows = [p.org.x, p.org.y, p.org.z, p.inv.x, p.inv.y, p.inv.z];
-            for (k, row) in rows.iter().enumerate() {
-                lo[k] = lo[k].vmin(p.active.select(*row, pinf));
-                hi[k] = hi[k].vmax(p.active.select(*row, ninf));
-            }
-            lo[6] = lo[6].vmin(p.active.select(p.tnear, pinf));
-            hi[6] = hi[6].vmax(p.active.select(p.tfar, ninf));
-        }
-        if !any {
-            return None;
-        }
-        let lo: [f32; 7] = std::array::from_fn(|k| lo[k].reduce_min());
-        let hi: [f32; 7] = std::array::from_fn(|k| hi[k].reduce_max());
-        let (tn, tf) = (lo[6], hi[6]);
-        let mut near = [0; 3];
-        let mut near_org = [0.0; 3];
-        let mut far_org = [0.0; 3];
-        let mut near_rdir = [0.0; 3];
-        let mut far_rdir = [0.0; 3];
-        for a in 0..3 {
-            let (ilo, ihi) = (lo[3 + a], hi[3 + a]);
-            let (olo, ohi) = (lo[a], hi[a]);
-            if ilo >= 0.0 {
-                near[a] = 2 * a;
-                (near_org[a], far_org[a]) = (ohi, olo);
-                (near_rdir[a], far_rdir[a]) = (ilo, ihi);
-            } else if ihi < 0.0 {
-                near[a] = 2 * a + 1;
-                (near_org[a], far_org[a]) = (olo, ohi);
-                (near_rdir[a], far_rdir[a]) = (ihi, ilo);
-            } else {
-                return None;
-            }
-        }
-        let v = |x: [f32; 3]| Vec3x { x: F32x8::splat(x[0]), y: F32x8::splat(x[1]), z: F32x8::splat(x[2]) };
-        Some(Self {
-            near,
-            near_org: v(near_org),
-            far_org: v(far_org),
-            near_rdir: v(near_rdir),
-            far_rdir: v(far_rdir),
-            tnear: F32x8::splat(tn),
-            tfar: tf,
-            scalars: [near_org, far_org, near_rdir, far_rdir],
-            tnear1: tn,
-        })
-    }
-
-    /// Could any ray of the tile hit the triangles of `block` (laid out for Möller–Trumbore)?
-    /// Bit `i` is set when lane `i`'s bounding box, grown by 2^-20 of its largest coordinate
-    /// magnitude (the rounding of `v0 + e1` and `v0 + e2` is far smaller), passes the same
-    /// interval test as [`Frustum::intersect_node`].
-    #[inline(always)]
-    pub fn intersect_triangles<B: TriBlock>(&self, block: &B) -> u32 {
-        self.intersect_triangles_in(block, TriangleTest::MollerTrumbore)
-    }
-
-    /// [`Frustum::intersect_triangles`] for a block laid out for `test` (whose second and
-    /// third rows are the vertices themselves in the watertight layout).
-    #[inline(always)]
-    pub fn intersect_triangles_in<B: TriBlock>(&self, block: &B, test: TriangleTest) -> u32 {
-        let (v0, e1, e2) = (block.v0(), block.e1(), block.e2());
-        let vertices = test == TriangleTest::Watertight;
-        let axis = |a: &B::V, b: &B::V, c: &B::V| {
-            let (p1, p2) = if vertices { (*b, *c) } else { (*a + *b, *a + *c) };
-            let lo = a.vmin(p1).vmin(p2);
-            let hi = a.vmax(p1).vmax(p2);
-            (lo, hi)
-        };
-        let (lx, hx) = axis(&v0.x, &e1.x, &e2.x);
-        let (ly, hy) = axis(&v0.y, &e1.y, &e2.y);
-        let (lz, hz) = axis(&v0.z, &e1.z, &e2.z);
-        let abs = |x: B::V| x & !B::V::splat(-0.0);
-        let mag = abs(lx).vmax(abs(hx)).vmax(abs(ly).vmax(abs(hy))).vmax(abs(lz).vmax(abs(hz)));
-        let pad = mag * B::V::splat(1.0 / (1 << 20) as f32) + B::V::splat(f32::MIN_POSITIVE);
-        let (lx, ly, lz) = (lx - pad, ly - pad, lz - pad);
-        let (hx, hy, hz) = (hx + pad, hy + pad, hz + pad);
-        let [no, fo, nr, fr] = self.scalars;
-        let sp = B::V::splat;
-        let near = |a: usize, lo: B::V, hi: B::V| if self.near[a] & 1 == 0 { (lo, hi) } else { (hi, lo) };
-        let (nx, fx) = near(0, lx, hx);
-        let (ny, fy) = near(1, ly, hy);
-        let (nz, fz) = near(2, lz, hz);
-        let tn = ((nx - sp(no[0])) * sp(nr[0]))
-            .vmax((ny - sp(no[1])) * sp(nr[1]))
-            .vmax(((nz - sp(no[2])) * sp(nr[2])).vmax(sp(self.tnear1)));
-        let tf = ((fx - sp(fo[0])) * sp(fr[0])).vmin((fy - sp(fo[1])) * sp(fr[1])).vmin((fz - sp(fo[2])) * sp(fr[2]));
-        let tf = (tf * sp(SLAB_WIDEN)).vmin(sp(self.tfar));
-        tn.le(tf).bitmask()
-    }
-
-    /// Could any ray of the tile hit the children of `n` before `self.tfar`? Returns the mask
-    /// of such children and lower bounds of their entry distances.
-    #[inline(always)]
-    pub fn intersect_node(&self, n: &Bvh8Node) -> (u32, F32x8) {
-        let b = &n.bounds;
-        let tnx = (F32x8::load(&b[self.near[0]]) - self.near_org.x) * self.near_rdir.x;
-        let tny = (F32x8::load(&b[self.near[1]]) - self.near_org.y) * self.near_rdir.y;
-        let tnz = (F32x8::load(&b[self.near[2]]) - self.near_org.z) * self.near_rdir.z;
-        let tfx = (F32x8::load(&b[self.near[0] ^ 1]) - self.far_org.x) * self.far_rdir.x;
-        let tfy = (F32x8::load(&b[self.near[1] ^ 1]) - self.far_org.y) * self.far_rdir.y;
-        let tfz = (F32x8::load(&b[self.near[2] ^ 1]) - self.far_org.z) * self.far_rdir.z;
-        let tn = tnx.vmax(tny).vmax(tnz.vmax(self.tnear));
-        let tf = (tfx.vmin(tfy).vmin(tfz) * F32x8::splat(SLAB_WIDEN)).vmin(F32x8::splat(self.tfar));
-        (tn.le(tf).bitmask(), tn)
     }
 }

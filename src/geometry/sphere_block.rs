@@ -9,7 +9,7 @@
 
 use crate::geometry::sphere::intersect_sphere;
 use crate::math::Vec3;
-use crate::simd::{F32x4, Lanes, Vec3x};
+use crate::simd::{Lanes, Vec3x};
 
 /// Rays against spheres lane by lane (either side may be a broadcast): `(hit mask, t)`.
 /// The nearest root in `(tnear, tfar]`, the far one when the near one is outside it.
@@ -71,10 +71,10 @@ impl Sphere4 {
         self.prim[lane] = prim;
     }
 
-    /// Centres as lanes.
+    /// Centres as lanes (`V` must have 4 lanes).
     #[inline(always)]
-    pub fn centers(&self) -> Vec3x<F32x4> {
-        Vec3x { x: F32x4::load(&self.center[0]), y: F32x4::load(&self.center[1]), z: F32x4::load(&self.center[2]) }
+    pub fn centers<V: Lanes>(&self) -> Vec3x<V> {
+        Vec3x { x: V::load(&self.center[0]), y: V::load(&self.center[1]), z: V::load(&self.center[2]) }
     }
 
     /// Centre of `lane`.
@@ -83,16 +83,16 @@ impl Sphere4 {
         Vec3::new(self.center[0][lane], self.center[1][lane], self.center[2][lane])
     }
 
-    /// One ray against the four spheres: `(hit mask bits, t)`.
+    /// One ray against the four spheres, in lanes `V` of 4: `(hit mask bits, t)`.
     #[inline(always)]
-    pub fn intersect1(&self, origin: Vec3, dir: Vec3, tnear: f32, tfar: f32) -> (u32, F32x4) {
+    pub fn intersect1<V: Lanes>(&self, origin: Vec3, dir: Vec3, tnear: f32, tfar: f32) -> (u32, V) {
         let (m, t) = sphere_lanes(
             &Vec3x::splat(origin),
             &Vec3x::splat(dir),
-            F32x4::splat(tnear),
-            F32x4::splat(tfar),
+            V::splat(tnear),
+            V::splat(tfar),
             &self.centers(),
-            F32x4::load(&self.radius),
+            V::load(&self.radius),
         );
         (m.bitmask(), t)
     }

@@ -27,7 +27,7 @@ use crate::geometry::triangle::intersect_triangle_edges;
 use crate::geometry::watertight::{ShearLanes, intersect_triangle_watertight, shear_frame, watertight};
 use crate::math::Vec3;
 use crate::ray::Ray;
-use crate::simd::{F32x4, F32x8, Lanes, Vec3x};
+use crate::simd::{IsaLanes, Lanes, Vec3x};
 
 /// Intersects rays with triangles lane by lane: ray lane `i` against triangle lane `i`
 /// (either side may be a broadcast). Returns `(hit mask, t, u, v)`; a lane hits when
@@ -107,9 +107,13 @@ fn redo_t_f64<V: Lanes>(t: V, lanes: u32, e2: &Vec3x<V>, q: &Vec3x<V>, inv_det: 
 }
 
 /// A block of M triangles in structure-of-arrays form. Implemented by [`Tri4`] and [`Tri8`].
+///
+/// A block stores three vectors per triangle, `a`, `b`, `c`, as rows of M floats per axis;
+/// what they mean depends on the BVH's [`TriangleTest`]: `v0`, `e1 = v1 - v0`, `e2 = v2 - v0`
+/// for Möller–Trumbore, the vertices `v0`, `v1`, `v2` for the watertight test.
 pub trait TriBlock: bytemuck::Pod + Send + Sync + std::fmt::Debug + 'static {
-    /// Lane vector of width M.
-    type V: Lanes;
+    /// M lanes of the ISA `I` (`I::F4` or `I::F8`).
+    type Lanes<I: IsaLanes>: Lanes;
     /// Triangles per block.
     const M: usize;
     /// A block whose lanes are all padding.
@@ -128,36 +132,35 @@ pub trait TriBlock: bytemuck::Pod + Send + Sync + std::fmt::Debug + 'static {
             TriangleTest::Watertight => self.set_vertices(lane, v0, v1, v2, prim),
         }
     }
-    /// Row `axis` (0 = x, 1 = y, 2 = z) of stored vector `r` (0 = `v0`, 1 = `e1` or `v1`,
-    /// 2 = `e2` or `v2`).
-    fn row(&self, r: usize, axis: usize) -> Self::V;
-    /// First vertices.
-    fn v0(&self) -> Vec3x<Self::V>;
-    /// First edges.
-    fn e1(&self) -> Vec3x<Self::V>;
-    /// Second edges.
-    fn e2(&self) -> Vec3x<Self::V>;
+    /// The M floats of stored vector `r` (0 = `a`, 1 = `b`, 2 = `c`) on `axis` (0 = x).
+    fn row_array(&self, r: usize, axis: usize) -> &[f32];
     /// Primitive id of `lane` (`u32::MAX` for padding).
     fn prim(&self, lane: usize) -> u32;
-    /// The three stored vectors of `lane` as scalars: `v0`, `e1`, `e2` in the
-    /// Möller–Trumbore layout, `v0`, `v1`, `v2` in the watertight one.
+    /// The three stored vectors `a`, `b`, `c` of `lane` as scalars.
     fn lane_rows(&self, lane: usize) -> [Vec3; 3];
+
+    /// Stored vector `r` on `axis` as lanes (`V` must have M lanes).
+    #[inline(always)]
+    fn row<V: Lanes>(&self, r: usize, axis: usize) -> V {
+        debug_assert_eq!(V::LANES, Self::M);
+        V::load(self.row_array(r, axis))
+    }
+    /// Stored vector `r` as lanes.
+    #[inline(always)]
+    fn rows<V: Lanes>(&self, r: usize) -> Vec3x<V> {
+        Vec3x { x: self.row(r, 0), y: self.row(r, 1), z: self.row(r, 2) }
+    }
     /// Bit `i` set when lane `i` holds a triangle (not padding).
     #[inline]
     fn live_lanes(&self) -> u32 {
         (0..Self::M).filter(|&l| self.prim(l) != u32::MAX).fold(0, |m, l| m | 1 << l)
     }
 
-    /// One ray against all M triangles: `(hit mask, t, u, v)` per lane.
+    /// One ray against all M triangles of a Möller–Trumbore block: `(hit mask, t, u, v)`
+    /// per lane (`V` must have M lanes).
     #[inline(always)]
-    fn intersect1(
-        &self,
-        origin: &Vec3x<Self::V>,
-        dir: &Vec3x<Self::V>,
-        tnear: Self::V,
-        tfar: Self::V,
-    ) -> BlockHits<Self::V> {
-        let (mask, t, u, v) = moller_trumbore(origin, dir, tnear, tfar, &self.v0(), &self.e1(), &self.e2());
+    fn intersect1<V: Lanes>(&self, origin: &Vec3x<V>, dir: &Vec3x<V>, tnear: V, tfar: V) -> BlockHits<V> {
+        let (mask, t, u, v) = moller_trumbore(origin, dir, tnear, tfar, &self.rows(0), &self.rows(1), &self.rows(2));
         BlockHits { mask: mask.bitmask(), t, u, v }
     }
 
@@ -211,37 +214,39 @@ impl TriangleTest {
     }
 }
 
-/// A ray/triangle test as the traversal kernels use it: per-ray constants, one ray against
-/// the M lanes of a block, K rays against one triangle, and the scalar twin, all on the rows
-/// a block stores in the kernel's layout. Implemented by [`MollerTrumboreKernel`] and
-/// [`WatertightKernel`]; all three tests of one kernel are bit-identical lane by lane.
+/// A ray/triangle test as the traversal kernels use it (Embree's primitive intersector):
+/// per-ray constants, one ray against the M lanes of a block, K rays against one triangle,
+/// and the scalar twin, all on the vectors a block stores in the test's layout. Implemented
+/// by [`MollerTrumboreKernel`] and [`WatertightKernel`]; the three tests of one kernel are
+/// bit-identical lane by lane. Kernels take it as the type parameter `P`.
 pub trait TriangleKernel: 'static {
     /// The test (and block layout) this kernel implements.
     const TEST: TriangleTest;
-    /// Per-ray constants of one ray, in lanes of width `W`.
-    type Ray1<W: Lanes>: Copy;
+    /// Per-ray constants of one ray, in lanes `V`.
+    type Ray1<V: Lanes>: Copy;
     /// The constants of `ray` (which must be valid).
-    fn ray1<W: Lanes>(ray: &Ray) -> Self::Ray1<W>;
-    /// One ray against the M triangles of `block`: `(hit mask, t, u, v)` per lane.
-    fn block<B: TriBlock>(block: &B, ray: &Self::Ray1<B::V>, tnear: B::V, tfar: B::V) -> BlockHits<B::V>;
+    fn ray1<V: Lanes>(ray: &Ray) -> Self::Ray1<V>;
+    /// One ray against the M triangles of `block`: `(hit mask, t, u, v)` per lane (`V` must
+    /// have M lanes).
+    fn block<B: TriBlock, V: Lanes>(block: &B, ray: &Self::Ray1<V>, tnear: V, tfar: V) -> BlockHits<V>;
     /// Per-ray constants of K rays (one per lane).
-    type RayK<W: Lanes>: Copy;
+    type RayK<V: Lanes>: Copy;
     /// The constants of the rays `org + t dir` (inactive lanes may hold anything).
-    fn ray_k<W: Lanes>(org: &Vec3x<W>, dir: &Vec3x<W>) -> Self::RayK<W>;
-    /// K rays against one triangle given by its stored rows ([`TriBlock::lane_rows`]):
+    fn ray_k<V: Lanes>(org: &Vec3x<V>, dir: &Vec3x<V>) -> Self::RayK<V>;
+    /// K rays against one triangle given by its stored vectors ([`TriBlock::lane_rows`]):
     /// `(hit mask, t, u, v)`.
-    fn broadcast<W: Lanes>(rows: &[Vec3; 3], rays: &Self::RayK<W>, tnear: W, tfar: W) -> (W, W, W, W);
+    fn broadcast<V: Lanes>(rows: &[Vec3; 3], rays: &Self::RayK<V>, tnear: V, tfar: V) -> (V, V, V, V);
     /// The scalar twin, on a triangle's vertices.
     fn scalar(ray: &Ray, tfar: f32, v0: Vec3, v1: Vec3, v2: Vec3) -> Option<(f32, f32, f32)>;
 }
 
 /// Origins and directions in lanes: the per-ray constants of Möller–Trumbore.
 #[derive(Clone, Copy, Debug)]
-pub struct RayLanes<W> {
+pub struct RayLanes<V> {
     /// Origins.
-    pub org: Vec3x<W>,
+    pub org: Vec3x<V>,
     /// Directions.
-    pub dir: Vec3x<W>,
+    pub dir: Vec3x<V>,
 }
 
 /// [`moller_trumbore`] on blocks of `v0`, `e1`, `e2`.
@@ -250,27 +255,27 @@ pub struct MollerTrumboreKernel;
 
 impl TriangleKernel for MollerTrumboreKernel {
     const TEST: TriangleTest = TriangleTest::MollerTrumbore;
-    type Ray1<W: Lanes> = RayLanes<W>;
-    type RayK<W: Lanes> = RayLanes<W>;
+    type Ray1<V: Lanes> = RayLanes<V>;
+    type RayK<V: Lanes> = RayLanes<V>;
 
     #[inline(always)]
-    fn ray1<W: Lanes>(ray: &Ray) -> RayLanes<W> {
+    fn ray1<V: Lanes>(ray: &Ray) -> RayLanes<V> {
         RayLanes { org: Vec3x::splat(ray.origin), dir: Vec3x::splat(ray.dir) }
     }
 
     #[inline(always)]
-    fn block<B: TriBlock>(block: &B, ray: &RayLanes<B::V>, tnear: B::V, tfar: B::V) -> BlockHits<B::V> {
+    fn block<B: TriBlock, V: Lanes>(block: &B, ray: &RayLanes<V>, tnear: V, tfar: V) -> BlockHits<V> {
         block.intersect1(&ray.org, &ray.dir, tnear, tfar)
     }
 
     #[inline(always)]
-    fn ray_k<W: Lanes>(org: &Vec3x<W>, dir: &Vec3x<W>) -> RayLanes<W> {
+    fn ray_k<V: Lanes>(org: &Vec3x<V>, dir: &Vec3x<V>) -> RayLanes<V> {
         RayLanes { org: *org, dir: *dir }
     }
 
     #[inline(always)]
-    fn broadcast<W: Lanes>(rows: &[Vec3; 3], rays: &RayLanes<W>, tnear: W, tfar: W) -> (W, W, W, W) {
-        let [v0, e1, e2] = rows.map(Vec3x::splat);
+    fn broadcast<V: Lanes>(rows: &[Vec3; 3], rays: &RayLanes<V>, tnear: V, tfar: V) -> (V, V, V, V) {
+        let (v0, e1, e2) = (Vec3x::splat(rows[0]), Vec3x::splat(rows[1]), Vec3x::splat(rows[2]));
         moller_trumbore(&rays.org, &rays.dir, tnear, tfar, &v0, &e1, &e2)
     }
 
@@ -282,13 +287,22 @@ impl TriangleKernel for MollerTrumboreKernel {
 
 /// One ray's sheared frame, as lanes for the watertight block test.
 #[derive(Clone, Copy, Debug)]
-pub struct ShearRay<W> {
+pub struct ShearRay<V> {
     /// `[kx, ky, kz]`.
     axes: [usize; 3],
     /// The origin's `[kx, ky, kz]` components.
-    org: [W; 3],
+    org: [V; 3],
     /// `[Sx, Sy, Sz]`.
-    shear: [W; 3],
+    shear: [V; 3],
+}
+
+impl<V: Lanes> ShearRay<V> {
+    /// Stored vertex `r` of `block`'s lanes relative to the origin, permuted to `[kx, ky, kz]`.
+    #[inline(always)]
+    fn relative<B: TriBlock>(&self, block: &B, r: usize) -> [V; 3] {
+        let [kx, ky, kz] = self.axes;
+        [block.row::<V>(r, kx) - self.org[0], block.row::<V>(r, ky) - self.org[1], block.row::<V>(r, kz) - self.org[2]]
+    }
 }
 
 /// [`crate::geometry::watertight`] on blocks of `v0`, `v1`, `v2`.
@@ -297,31 +311,34 @@ pub struct WatertightKernel;
 
 impl TriangleKernel for WatertightKernel {
     const TEST: TriangleTest = TriangleTest::Watertight;
-    type Ray1<W: Lanes> = ShearRay<W>;
-    type RayK<W: Lanes> = ShearLanes<W>;
+    type Ray1<V: Lanes> = ShearRay<V>;
+    type RayK<V: Lanes> = ShearLanes<V>;
 
     #[inline(always)]
-    fn ray1<W: Lanes>(ray: &Ray) -> ShearRay<W> {
+    fn ray1<V: Lanes>(ray: &Ray) -> ShearRay<V> {
         let (axes, shear) = shear_frame(ray.dir);
-        ShearRay { axes, org: axes.map(|k| W::splat(ray.origin[k])), shear: shear.map(W::splat) }
+        let [kx, ky, kz] = axes;
+        ShearRay {
+            axes,
+            org: [V::splat(ray.origin[kx]), V::splat(ray.origin[ky]), V::splat(ray.origin[kz])],
+            shear: [V::splat(shear[0]), V::splat(shear[1]), V::splat(shear[2])],
+        }
     }
 
     #[inline(always)]
-    fn block<B: TriBlock>(block: &B, ray: &ShearRay<B::V>, tnear: B::V, tfar: B::V) -> BlockHits<B::V> {
-        let [kx, ky, kz] = ray.axes;
-        let rel =
-            |r: usize| [block.row(r, kx) - ray.org[0], block.row(r, ky) - ray.org[1], block.row(r, kz) - ray.org[2]];
-        let (mask, t, u, v) = watertight(rel(0), rel(1), rel(2), ray.shear, tnear, tfar, || block.live_lanes());
+    fn block<B: TriBlock, V: Lanes>(block: &B, ray: &ShearRay<V>, tnear: V, tfar: V) -> BlockHits<V> {
+        let (a, b, c) = (ray.relative(block, 0), ray.relative(block, 1), ray.relative(block, 2));
+        let (mask, t, u, v) = watertight(a, b, c, ray.shear, tnear, tfar, || block.live_lanes());
         BlockHits { mask: mask.bitmask(), t, u, v }
     }
 
     #[inline(always)]
-    fn ray_k<W: Lanes>(org: &Vec3x<W>, dir: &Vec3x<W>) -> ShearLanes<W> {
+    fn ray_k<V: Lanes>(org: &Vec3x<V>, dir: &Vec3x<V>) -> ShearLanes<V> {
         ShearLanes::new(org, dir)
     }
 
     #[inline(always)]
-    fn broadcast<W: Lanes>(rows: &[Vec3; 3], rays: &ShearLanes<W>, tnear: W, tfar: W) -> (W, W, W, W) {
+    fn broadcast<V: Lanes>(rows: &[Vec3; 3], rays: &ShearLanes<V>, tnear: V, tfar: V) -> (V, V, V, V) {
         rays.intersect(rows, tnear, tfar)
     }
 
@@ -365,17 +382,17 @@ impl<V: Lanes> BlockHits<V> {
 }
 
 macro_rules! tri_block {
-    ($(#[$doc:meta])* $name:ident, $m:expr, $v:ty, $align:expr, $size:expr) => {
+    ($(#[$doc:meta])* $name:ident, $m:expr, $lanes:ident, $align:expr, $size:expr) => {
         $(#[$doc])*
         #[repr(C, align($align))]
         #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
         pub struct $name {
-            /// `v0` as rows `[x; M], [y; M], [z; M]`.
-            pub v0: [[f32; $m]; 3],
-            /// `e1 = v1 - v0` (or `v1` in the watertight layout), rows as `v0`.
-            pub e1: [[f32; $m]; 3],
-            /// `e2 = v2 - v0` (or `v2` in the watertight layout), rows as `v0`.
-            pub e2: [[f32; $m]; 3],
+            /// First stored vector (`v0`) as rows `[x; M], [y; M], [z; M]`.
+            pub a: [[f32; $m]; 3],
+            /// Second stored vector: `e1 = v1 - v0`, or `v1` in the watertight layout.
+            pub b: [[f32; $m]; 3],
+            /// Third stored vector: `e2 = v2 - v0`, or `v2` in the watertight layout.
+            pub c: [[f32; $m]; 3],
             /// Scene primitive ids; `u32::MAX` in padding lanes.
             pub prim: [u32; $m],
         }
@@ -383,57 +400,36 @@ macro_rules! tri_block {
         const _: () = assert!(std::mem::align_of::<$name>() == $align);
 
         impl TriBlock for $name {
-            type V = $v;
+            type Lanes<I: IsaLanes> = I::$lanes;
             const M: usize = $m;
             const EMPTY: Self = Self {
-                v0: [[0.0; $m]; 3],
-                e1: [[0.0; $m]; 3],
-                e2: [[0.0; $m]; 3],
+                a: [[0.0; $m]; 3],
+                b: [[0.0; $m]; 3],
+                c: [[0.0; $m]; 3],
                 prim: [u32::MAX; $m],
             };
 
             fn set(&mut self, lane: usize, v0: Vec3, v1: Vec3, v2: Vec3, prim: u32) {
-                let (e1, e2) = (v1 - v0, v2 - v0);
-                for a in 0..3 {
-                    self.v0[a][lane] = v0[a];
-                    self.e1[a][lane] = e1[a];
-                    self.e2[a][lane] = e2[a];
-                }
-                self.prim[lane] = prim;
+                self.set_vertices(lane, v0, v1 - v0, v2 - v0, prim);
             }
 
             fn set_vertices(&mut self, lane: usize, v0: Vec3, v1: Vec3, v2: Vec3, prim: u32) {
-                for a in 0..3 {
-                    self.v0[a][lane] = v0[a];
-                    self.e1[a][lane] = v1[a];
-                    self.e2[a][lane] = v2[a];
+                for k in 0..3 {
+                    self.a[k][lane] = v0[k];
+                    self.b[k][lane] = v1[k];
+                    self.c[k][lane] = v2[k];
                 }
                 self.prim[lane] = prim;
             }
 
             #[inline(always)]
-            fn row(&self, r: usize, axis: usize) -> $v {
+            fn row_array(&self, r: usize, axis: usize) -> &[f32] {
                 let rows = match r {
-                    0 => &self.v0,
-                    1 => &self.e1,
-                    _ => &self.e2,
+                    0 => &self.a,
+                    1 => &self.b,
+                    _ => &self.c,
                 };
-                <$v>::load(&rows[axis])
-            }
-
-            #[inline(always)]
-            fn v0(&self) -> Vec3x<$v> {
-                Vec3x { x: <$v>::load(&self.v0[0]), y: <$v>::load(&self.v0[1]), z: <$v>::load(&self.v0[2]) }
-            }
-
-            #[inline(always)]
-            fn e1(&self) -> Vec3x<$v> {
-                Vec3x { x: <$v>::load(&self.e1[0]), y: <$v>::load(&self.e1[1]), z: <$v>::load(&self.e1[2]) }
-            }
-
-            #[inline(always)]
-            fn e2(&self) -> Vec3x<$v> {
-                Vec3x { x: <$v>::load(&self.e2[0]), y: <$v>::load(&self.e2[1]), z: <$v>::load(&self.e2[2]) }
+                &rows[axis]
             }
 
             #[inline(always)]
@@ -443,7 +439,7 @@ macro_rules! tri_block {
 
             fn lane_rows(&self, lane: usize) -> [Vec3; 3] {
                 let row = |r: &[[f32; $m]; 3]| Vec3::new(r[0][lane], r[1][lane], r[2][lane]);
-                [row(&self.v0), row(&self.e1), row(&self.e2)]
+                [row(&self.a), row(&self.b), row(&self.c)]
             }
         }
     };
@@ -453,7 +449,7 @@ tri_block!(
     /// Four triangles, structure of arrays: 160 bytes (40 per triangle).
     Tri4,
     4,
-    F32x4,
+    F4,
     32,
     160
 );
@@ -461,7 +457,7 @@ tri_block!(
     /// Eight triangles, structure of arrays: 320 bytes (40 per triangle), five cache lines.
     Tri8,
     8,
-    F32x8,
+    F8,
     64,
     320
 );
@@ -469,6 +465,7 @@ tri_block!(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::simd::F32x4;
 
     #[test]
     fn padding_lanes_never_hit() {

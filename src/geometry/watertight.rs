@@ -110,7 +110,9 @@ pub fn t_f64(uvw: [f32; 3], z: [f32; 3], inv_det: f32) -> f32 {
 /// origin, permuted to `[kx, ky, kz]`, and `s` the shear `[Sx, Sy, Sz]` (any lane may be a
 /// broadcast). Returns `(hit mask, t, u, v)` as [`intersect_triangle_watertight`] does, lane
 /// by lane. `live()` gives the lanes that hold real triangles, the only ones worth the
-/// double-precision recomputation (padding lanes' edge functions are always 0).
+/// double-precision recomputation (padding lanes' edge functions are always 0); it runs only
+/// when an edge function is exactly 0, and must be scalar code (a closure holding SIMD code
+/// would not be inlined into the ISA's kernel).
 #[inline(always)]
 pub fn watertight<V: Lanes>(
     a: [V; 3],
@@ -195,8 +197,7 @@ impl<V: Lanes> ShearLanes<V> {
     /// The frames of rays `org + t dir`, lane by lane as [`shear_frame`] computes them.
     #[inline(always)]
     pub fn new(org: &Vec3x<V>, dir: &Vec3x<V>) -> Self {
-        let abs = |x: V| x & !V::splat(-0.0);
-        let (ax, ay, az) = (abs(dir.x), abs(dir.y), abs(dir.z));
+        let (ax, ay, az) = (dir.x.abs(), dir.y.abs(), dir.z.abs());
         let z_is_x = ax.ge(ay) & ax.ge(az);
         let z_is_y = !z_is_x & ay.ge(az);
         let dz = z_is_x.select(dir.x, z_is_y.select(dir.y, dir.z));
@@ -219,8 +220,10 @@ impl<V: Lanes> ShearLanes<V> {
     /// The K rays against one triangle `(v0, v1, v2)` (broadcast).
     #[inline(always)]
     pub fn intersect(&self, tri: &[Vec3; 3], tnear: V, tfar: V) -> (V, V, V, V) {
-        let rel = |p: Vec3| self.permute(&(Vec3x::splat(p) - self.org));
-        watertight(rel(tri[0]), rel(tri[1]), rel(tri[2]), self.shear, tnear, tfar, || u32::MAX)
+        let a = self.permute(&(Vec3x::splat(tri[0]) - self.org));
+        let b = self.permute(&(Vec3x::splat(tri[1]) - self.org));
+        let c = self.permute(&(Vec3x::splat(tri[2]) - self.org));
+        watertight(a, b, c, self.shear, tnear, tfar, || u32::MAX)
     }
 }
 

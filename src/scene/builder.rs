@@ -10,6 +10,7 @@ use crate::bvh::{BuildOptions, BuildPrim, Bvh2, Bvh8, build_bvh2_kinds, collapse
 use crate::geometry::TriangleTest;
 use crate::math::{Aabb, Vec3};
 use crate::scene::{Camera, Light, Material, MaterialId, Scene, SpheresSoa, TrianglesSoa};
+use crate::simd::Isa;
 
 /// Coordinates beyond this magnitude are rejected at commit (Embree's limit, `FLT_LARGE`).
 pub const MAX_COORDINATE: f32 = 1.844e18;
@@ -332,8 +333,17 @@ impl Filtered {
         };
         let bvh2 = build_bvh2_kinds(&mut prims, opts, nt as u32);
         drop(prims);
-        let mut scene =
-            Scene { triangles, spheres, materials, lights, camera, bounds, bvh2: None, bvh8: Bvh8::default() };
+        let mut scene = Scene {
+            triangles,
+            spheres,
+            materials,
+            lights,
+            camera,
+            bounds,
+            bvh2: None,
+            bvh8: Bvh8::default(),
+            isa: Isa::default_for_process(),
+        };
         let test = TriangleTest::from_watertight(opts.watertight);
         scene.bvh8 = collapse_for(&bvh2, |id| scene.prim_shape(id), nt as u32, &opts.collapse, test);
         scene.bvh2 = opts.keep_bvh2.then_some(bvh2);
@@ -343,7 +353,7 @@ impl Filtered {
     /// The scene with acceleration structures that were built for exactly this geometry.
     pub(crate) fn with_accel(self, bounds: Aabb, bvh2: Option<Bvh2>, bvh8: Bvh8) -> Scene {
         let Filtered { triangles, spheres, materials, lights, camera } = self;
-        Scene { triangles, spheres, materials, lights, camera, bounds, bvh2, bvh8 }
+        Scene { triangles, spheres, materials, lights, camera, bounds, bvh2, bvh8, isa: Isa::default_for_process() }
     }
 }
 

@@ -10,33 +10,19 @@
 //! batches was measured and lost (1 thread, best of 7, Mrays/s, diffuse bounces: Stanford
 //! dragon 3.17 with packets against 2.58 ray by ray, CS184 CBbunny 14.3 against 10.5, beetle
 //! 12.3 against 8.4), and so did tiles of 4 packets under one frustum (see
-//! [`crate::bvh::traverse_packet`]). Shadow-ray streams also carry an [`OccluderCache`] from
+//! [`crate::bvh::traverse_packet`]). Shadow-ray streams also carry an [`OccluderCache`](crate::bvh::traverse_packet::OccluderCache) from
 //! packet to packet.
 
-use crate::bvh::traverse_packet::{OccluderCache, PacketRays, intersect_hybrid, occluded_hybrid};
+use crate::bvh::{Counter, NoCount};
 use crate::ray::{Hit, Ray, RayPacket8, RayPacket16};
 use crate::scene::Scene;
-use crate::simd::{F32x8, F32x16};
 use rayon::prelude::*;
 
-/// A packet finishes a subtree as single rays once this many or fewer of its rays still
-/// want it (Embree's hybrid switch threshold).
-///
-/// Measured on the Stanford dragon (871k triangles, 1024 x 768, 1 thread, best of 7, Mrays/s),
-/// closest hit with 16-ray packets: threshold 0 / 1 / 3 = 29.1 / 32.5 / 29.2 on camera rays,
-/// 2.85 / 2.84 / 2.91 on diffuse bounces; any hit (shadow rays): 7.18 / 8.27 / 7.79 (at 2).
-pub const HYBRID_THRESHOLD: usize = 1;
-
-/// Rays per rayon task of the stream kernels (64 packets of 16).
+/// Rays per rayon task of the stream queries (64 packets of 16).
 const STREAM_CHUNK: usize = 1024;
 
-#[inline(always)]
-fn threshold() -> usize {
-    HYBRID_THRESHOLD
-}
-
 macro_rules! packet_queries {
-    ($intersect:ident, $occluded:ident, $packet:ty, $mask:ty, $v:ty, $doc_k:expr) => {
+    ($intersect:ident, $occluded:ident, $packet:ty, $mask:ty, $doc_k:expr) => {
         #[doc = concat!("Closest hits of the ", $doc_k, " rays in the lanes set in `valid` (see the packet type for the")]
         /// layout). Hit lanes get `tfar = t`, `u`, `v`, `prim`; missed lanes get
         /// `prim = Hit::NONE`; invalid rays ([`Ray::is_valid`]) miss; lanes outside `valid`
@@ -56,28 +42,13 @@ macro_rules! packet_queries {
         /// # Ok::<(), raypack::SceneError>(())
         /// ```
         pub fn $intersect(&self, packet: &mut $packet, valid: $mask) {
-            let p = packet;
-            let mut rays = PacketRays::<$v>::from_rows(
-                [&p.org_x, &p.org_y, &p.org_z],
-                [&p.dir_x, &p.dir_y, &p.dir_z],
-                &p.tnear,
-                &p.tfar,
-                valid as u32,
-            );
-            intersect_hybrid(&self.bvh8, &mut rays, threshold());
-            let (mut t, mut u, mut v, mut prim) = ([0.0f32; 16], [0.0f32; 16], [0.0f32; 16], [0u32; 16]);
-            rays.store_hits(&mut t, &mut u, &mut v, &mut prim);
-            for i in crate::simd::bits(valid as u32) {
-                p.prim[i] = prim[i];
-                if prim[i] != Hit::NONE {
-                    p.tfar[i] = t[i];
-                    p.u[i] = u[i];
-                    p.v[i] = v[i];
-                    if self.has_spheres() {
-                        let mut h = p.hit(i);
-                        self.finish_hit(&p.ray(i), &mut h);
-                        (p.u[i], p.v[i]) = (h.u, h.v);
-                    }
+            let before = self.has_spheres().then(|| *packet);
+            self.bvh8.intersect_packet_with(self.isa, packet, valid as u32, &mut NoCount);
+            if let Some(before) = before {
+                for i in crate::simd::bits(valid as u32) {
+                    let mut h = packet.hit(i);
+                    self.finish_hit(&before.ray(i), &mut h);
+                    (packet.u[i], packet.v[i]) = (h.u, h.v);
                 }
             }
         }
@@ -99,22 +70,14 @@ macro_rules! packet_queries {
         /// # Ok::<(), raypack::SceneError>(())
         /// ```
         pub fn $occluded(&self, packet: &$packet, valid: $mask) -> $mask {
-            let p = packet;
-            let rays = PacketRays::<$v>::from_rows(
-                [&p.org_x, &p.org_y, &p.org_z],
-                [&p.dir_x, &p.dir_y, &p.dir_z],
-                &p.tnear,
-                &p.tfar,
-                valid as u32,
-            );
-            occluded_hybrid(&self.bvh8, &rays, threshold(), &mut OccluderCache::default()) as $mask
+            self.bvh8.occluded_packet_with(self.isa, packet, valid as u32, &mut NoCount) as $mask
         }
     };
 }
 
 impl Scene {
-    packet_queries!(intersect8, occluded8, RayPacket8, u8, F32x8, "8");
-    packet_queries!(intersect16, occluded16, RayPacket16, u16, F32x16, "16");
+    packet_queries!(intersect8, occluded8, RayPacket8, u8, "8");
+    packet_queries!(intersect16, occluded16, RayPacket16, u16, "16");
 
     /// Closest hits of `rays` into `hits` (same length), over all rayon threads: the rays are
     /// traced as 16-ray packets in the order given, so consecutive rays should be coherent when
@@ -142,22 +105,15 @@ impl Scene {
 
     /// [`Scene::intersect_stream`] on the calling thread only.
     pub fn intersect_batch(&self, rays: &[Ray], hits: &mut [Hit]) {
-        assert_eq!(rays.len(), hits.len(), "one hit per ray");
-        let th = threshold();
-        for (k, (r, h)) in rays.chunks(16).zip(hits.chunks_mut(16)).enumerate() {
-            prefetch_rays(rays, (k + 2) * 16);
-            let mut p = PacketRays::<F32x16>::new(r, u32::MAX);
-            intersect_hybrid(&self.bvh8, &mut p, th);
-            let (mut t, mut u, mut v, mut prim) = ([0.0f32; 16], [0.0f32; 16], [0.0f32; 16], [0u32; 16]);
-            p.store_hits(&mut t, &mut u, &mut v, &mut prim);
-            for (i, out) in h.iter_mut().enumerate() {
-                let miss = prim[i] == Hit::NONE;
-                *out = Hit { t: if miss { f32::INFINITY } else { t[i] }, u: u[i], v: v[i], prim: prim[i] };
-            }
-            if self.has_spheres() {
-                for (ray, out) in r.iter().zip(h.iter_mut()) {
-                    self.finish_hit(ray, out);
-                }
+        self.intersect_batch_counted(rays, hits, &mut NoCount);
+    }
+
+    /// [`Scene::intersect_batch`], adding the kernels' work to `counter`.
+    pub fn intersect_batch_counted<C: Counter>(&self, rays: &[Ray], hits: &mut [Hit], counter: &mut C) {
+        self.bvh8.intersect_stream_with(self.isa, rays, hits, counter);
+        if self.has_spheres() {
+            for (ray, out) in rays.iter().zip(hits.iter_mut()) {
+                self.finish_hit(ray, out);
             }
         }
     }
@@ -186,27 +142,11 @@ impl Scene {
 
     /// [`Scene::occluded_stream`] on the calling thread only.
     pub fn occluded_batch(&self, rays: &[Ray], occluded: &mut [bool]) {
-        assert_eq!(rays.len(), occluded.len(), "one answer per ray");
-        let th = threshold();
-        let mut cache = OccluderCache::default();
-        for (k, (r, o)) in rays.chunks(16).zip(occluded.chunks_mut(16)).enumerate() {
-            prefetch_rays(rays, (k + 2) * 16);
-            let p = PacketRays::<F32x16>::new(r, u32::MAX);
-            let bits = occluded_hybrid(&self.bvh8, &p, th, &mut cache);
-            for (i, x) in o.iter_mut().enumerate() {
-                *x = bits >> i & 1 != 0;
-            }
-        }
+        self.occluded_batch_counted(rays, occluded, &mut NoCount);
     }
-}
 
-/// Prefetches the 16 rays from `rays[start]` (eight cache lines), if there are any.
-#[inline(always)]
-fn prefetch_rays(rays: &[Ray], start: usize) {
-    if start + 16 <= rays.len() {
-        let p = rays[start..].as_ptr() as *const u8;
-        for line in 0..8 {
-            crate::bvh::bvh8::prefetch_line(p.wrapping_add(64 * line));
-        }
+    /// [`Scene::occluded_batch`], adding the kernels' work to `counter`.
+    pub fn occluded_batch_counted<C: Counter>(&self, rays: &[Ray], occluded: &mut [bool], counter: &mut C) {
+        self.bvh8.occluded_stream_with(self.isa, rays, occluded, counter);
     }
 }

@@ -2,13 +2,14 @@
 //!
 //! Primitive ids are scene-wide: triangles `0 .. num_triangles()`, then spheres.
 
-use crate::bvh::{Bvh2, Bvh8, BvhStats, PrimShape};
+use crate::bvh::{Bvh2, Bvh8, BvhStats, Counter, NoCount, PrimShape};
 use crate::geometry::{
     MollerTrumboreKernel, TriangleKernel, TriangleTest, WatertightKernel, intersect_sphere, sphere::sphere_uv,
 };
 use crate::math::{Aabb, Vec3};
 use crate::ray::{Hit, Ray};
 use crate::scene::{Camera, Light, Material};
+use crate::simd::{Isa, IsaError};
 
 /// Triangle meshes, all merged, as structure of arrays.
 #[derive(Clone, Debug, Default)]
@@ -103,7 +104,7 @@ pub struct SurfaceHit {
 
 /// A committed, immutable scene that answers ray queries. Build one with
 /// [`crate::SceneBuilder`].
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 pub struct Scene {
     /// Triangle meshes.
     pub triangles: TrianglesSoa,
@@ -119,6 +120,8 @@ pub struct Scene {
     /// The binary BVH, when [`crate::BuildOptions::keep_bvh2`] kept it.
     pub(crate) bvh2: Option<Bvh2>,
     pub(crate) bvh8: Bvh8,
+    /// The ISA tier the queries run on (always one the CPU supports).
+    pub(crate) isa: Isa,
 }
 
 impl Scene {
@@ -162,6 +165,32 @@ impl Scene {
     /// The 8-wide BVH the SIMD kernels traverse.
     pub fn bvh8(&self) -> &Bvh8 {
         &self.bvh8
+    }
+
+    /// The instruction-set tier the queries run on: [`Isa::default_for_process`] (the CPU's
+    /// best, or lower under `RAYPACK_ISA`) unless [`Scene::set_isa`] chose another.
+    pub fn isa(&self) -> Isa {
+        self.isa
+    }
+
+    /// Runs the queries on `isa`'s kernels from now on (all tiers give the same hits).
+    /// Fails, and changes nothing, when the CPU lacks `isa`.
+    ///
+    /// ```
+    /// # use raypack::{BuildOptions, Isa, Ray, SceneBuilder, Vec3, Material};
+    /// let mut b = SceneBuilder::new();
+    /// let m = b.add_material(Material::default());
+    /// b.add_sphere(Vec3::ZERO, 1.0, m)?;
+    /// let (mut scene, _) = b.commit(&BuildOptions::default());
+    /// let ray = Ray::new(Vec3::new(0.3, 0.2, 5.0), -Vec3::Z);
+    /// let best = scene.intersect1(&ray);
+    /// scene.set_isa(Isa::Baseline)?; // SSE2: every x86-64 CPU has it
+    /// assert_eq!(scene.intersect1(&ray), best);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn set_isa(&mut self, isa: Isa) -> Result<(), IsaError> {
+        self.isa = isa.check()?;
+        Ok(())
     }
 
     /// The shape of primitive `prim`, as the BVH8 collapse needs it.
@@ -285,7 +314,14 @@ impl Scene {
     /// ```
     #[inline]
     pub fn intersect1(&self, ray: &Ray) -> Hit {
-        let mut hit = self.bvh8.intersect1(ray);
+        self.intersect1_counted(ray, &mut NoCount)
+    }
+
+    /// [`Scene::intersect1`], adding the kernel's work to `counter` (for example a
+    /// [`crate::bvh::TraversalCounts`]).
+    #[inline]
+    pub fn intersect1_counted<C: Counter>(&self, ray: &Ray, counter: &mut C) -> Hit {
+        let mut hit = self.bvh8.intersect1_with(self.isa, ray, counter);
         self.finish_hit(ray, &mut hit);
         hit
     }
@@ -306,7 +342,13 @@ impl Scene {
     /// ```
     #[inline]
     pub fn occluded1(&self, ray: &Ray) -> bool {
-        self.bvh8.occluded1(ray)
+        self.occluded1_counted(ray, &mut NoCount)
+    }
+
+    /// [`Scene::occluded1`], adding the kernel's work to `counter`.
+    #[inline]
+    pub fn occluded1_counted<C: Counter>(&self, ray: &Ray, counter: &mut C) -> bool {
+        self.bvh8.occluded1_with(self.isa, ray, counter)
     }
 
     /// Local geometry at `hit` (which must be a hit of `ray` on this scene).

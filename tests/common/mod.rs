@@ -2,8 +2,9 @@
 #![allow(dead_code)]
 
 use raypack::generate::Mesh;
+use raypack::kernels::{KERNELS, Kernel, Results};
 use raypack::render::sampler::Rng;
-use raypack::{BuildOptions, Material, Ray, Scene, SceneBuilder, Vec3};
+use raypack::{BuildOptions, Isa, Material, Ray, Scene, SceneBuilder, Vec3};
 use std::path::PathBuf;
 
 /// Commits `meshes` (and `spheres`: centre, radius) into a scene with one diffuse material.
@@ -69,4 +70,39 @@ pub fn expect_error(bytes: &[u8], name: &str, location: &str) -> String {
     assert!(text.starts_with(name), "error does not name the file first: {text}");
     assert!(e.location().is_some_and(|l| l.contains(location)), "error does not name {location:?}: {text}");
     text
+}
+
+/// The scene on every ISA tier this process may run ([`Isa::available`]: the CPU's tiers up
+/// to `RAYPACK_ISA`), as copies set to each.
+pub fn on_every_isa(scene: &Scene) -> Vec<(Isa, Scene)> {
+    Isa::available()
+        .map(|isa| {
+            let mut s = scene.clone();
+            s.set_isa(isa).expect("available tiers are supported");
+            (isa, s)
+        })
+        .collect()
+}
+
+/// Every kernel of the registry on `rays`: the scalar references once, each SIMD kernel on
+/// every ISA tier of [`on_every_isa`]. Returns `(name [isa], results)`.
+pub fn every_kernel(scene: &Scene, rays: &[Ray]) -> Vec<(String, Results)> {
+    every_kernel_where(scene, rays, |_| true)
+}
+
+/// [`every_kernel`] restricted to the kernels `keep` accepts.
+pub fn every_kernel_where(scene: &Scene, rays: &[Ray], keep: impl Fn(&Kernel) -> bool) -> Vec<(String, Results)> {
+    let run = |s: &Scene, k: &Kernel| {
+        let mut out = Results::for_kernel(k, rays.len());
+        k.run(s, rays, &mut out);
+        out
+    };
+    let mut out: Vec<(String, Results)> =
+        KERNELS.iter().filter(|k| !k.simd && keep(k)).map(|k| (k.name.to_string(), run(scene, k))).collect();
+    for (isa, s) in on_every_isa(scene) {
+        out.extend(
+            raypack::kernels::simd_kernels().filter(|k| keep(k)).map(|k| (format!("{} [{isa}]", k.name), run(&s, k))),
+        );
+    }
+    out
 }

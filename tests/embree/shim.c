@@ -39,7 +39,7 @@ static const char* rp_error_string(enum RTCError code) {
 
 RpEmbree* rp_embree_new(const float* positions, size_t num_vertices, const uint32_t* indices,
                         size_t num_triangles, int quality, int flags, int threads,
-                        const char** error) {
+                        const char* max_isa, const char** error) {
   const char* dummy;
   if (!error) error = &dummy;
   *error = NULL;
@@ -49,9 +49,12 @@ RpEmbree* rp_embree_new(const float* positions, size_t num_vertices, const uint3
     return NULL;
   }
   atomic_init(&e->bytes, 0);
-  /* threads = 0: Embree's default (all hardware threads). */
-  char config[64] = "";
-  if (threads > 0) snprintf(config, sizeof config, "threads=%d,set_affinity=0", threads);
+  /* threads = 0: Embree's default (all hardware threads); no max_isa: the CPU's best. */
+  char config[128] = "";
+  size_t used = 0;
+  if (threads > 0) used += snprintf(config, sizeof config, "threads=%d,set_affinity=0", threads);
+  if (max_isa && *max_isa && used < sizeof config)
+    snprintf(config + used, sizeof config - used, "%smax_isa=%s", used ? "," : "", max_isa);
   e->device = rtcNewDevice(config);
   if (!e->device) {
     *error = rp_error_string(rtcGetDeviceError(NULL));

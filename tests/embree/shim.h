@@ -46,11 +46,13 @@ typedef struct RpEmbree RpEmbree;
 /* Creates a device and a scene holding one triangle mesh: `positions` holds x, y, z of
  * `num_vertices` vertices, `indices` three vertex indices per triangle. Copies both (into
  * Embree-allocated, padded buffers). `threads` > 0 limits the device's worker threads (its
- * builds and any internal parallelism) to that many; 0 uses all hardware threads. Returns
- * NULL on failure and, when `error` is not NULL, writes a static message there. */
+ * builds and any internal parallelism) to that many; 0 uses all hardware threads. `max_isa`
+ * (NULL or "" for none) caps the kernels Embree picks (its `max_isa=` device option: "sse2",
+ * "sse4.2", "avx", "avx2", "avx512"). Returns NULL on failure and, when `error` is not NULL,
+ * writes a static message there. */
 RpEmbree* rp_embree_new(const float* positions, size_t num_vertices, const uint32_t* indices,
                         size_t num_triangles, int quality, int flags, int threads,
-                        const char** error);
+                        const char* max_isa, const char** error);
 
 /* Builds the BVH. Returns 0 on success, or an Embree error code (see rp_embree_error). */
 int rp_embree_commit(RpEmbree* e);

@@ -1,0 +1,184 @@
+//! The registry of raypack's ray queries: every kernel a user can call, by name, in one
+//! table ([`KERNELS`]) that the benchmarks time, the kernel tests check against the scalar
+//! reference and the Embree cross-check compares hit for hit.
+//!
+//! Each SIMD kernel runs on every ISA tier the CPU has: set the scene's tier with
+//! [`Scene::set_isa`] (the tiers to try are [`Isa::available`]) and call [`Kernel::run`].
+//! Every kernel has the same contract: a slice of [`Ray`]s in, one result per ray out.
+//!
+//! ```
+//! use raypack::kernels::{KERNELS, Results};
+//! use raypack::{BuildOptions, Isa, Material, Ray, SceneBuilder, Vec3};
+//!
+//! let mut b = SceneBuilder::new();
+//! let m = b.add_material(Material::default());
+//! b.add_sphere(Vec3::ZERO, 1.0, m)?;
+//! let (mut scene, _) = b.commit(&BuildOptions::default());
+//! let rays: Vec<Ray> = (0..40).map(|i| Ray::new(Vec3::new(i as f32 * 0.05 - 1.0, 0.1, 5.0), -Vec3::Z)).collect();
+//! for isa in Isa::available() {
+//!     scene.set_isa(isa)?;
+//!     for k in KERNELS {
+//!         let mut out = Results::for_kernel(k, rays.len());
+//!         k.run(&scene, &rays, &mut out);
+//!         assert_eq!(out.hit_count(), 39, "{} on {isa}", k.name); // x = -1.0 grazes the sphere's edge and misses
+//!     }
+//! }
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+use crate::ray::{Hit, Ray, RayPacket8, RayPacket16};
+use crate::scene::Scene;
+#[cfg(doc)]
+use crate::simd::Isa;
+
+/// A closest-hit kernel over a slice of rays, on the calling thread.
+pub type IntersectFn = fn(&Scene, &[Ray], &mut [Hit]);
+/// An occlusion kernel over a slice of rays, on the calling thread.
+pub type OccludedFn = fn(&Scene, &[Ray], &mut [bool]);
+
+/// What a kernel answers.
+#[derive(Clone, Copy, Debug)]
+pub enum Query {
+    /// The closest hit of each ray.
+    Intersect(IntersectFn),
+    /// Whether anything blocks each ray.
+    Occluded(OccludedFn),
+}
+
+/// A named kernel.
+#[derive(Clone, Copy, Debug)]
+pub struct Kernel {
+    /// Name in tables, JSON and test messages, e.g. `Scene::intersect16`.
+    pub name: &'static str,
+    /// The query and its function.
+    pub query: Query,
+    /// False for the scalar reference (the binary BVH), which is the same on every ISA.
+    pub simd: bool,
+}
+
+impl Kernel {
+    /// True for occlusion kernels.
+    pub fn is_occlusion(&self) -> bool {
+        matches!(self.query, Query::Occluded(_))
+    }
+
+    /// Traces `rays` on the calling thread into `out`, on the scene's ISA.
+    ///
+    /// # Panics
+    /// When `out` holds the other query's results or its length differs from `rays`'.
+    pub fn run(&self, scene: &Scene, rays: &[Ray], out: &mut Results) {
+        match (self.query, out) {
+            (Query::Intersect(f), Results::Hits(h)) => f(scene, rays, h),
+            (Query::Occluded(f), Results::Occluded(o)) => f(scene, rays, o),
+            _ => panic!("{}: results of the other query", self.name),
+        }
+    }
+}
+
+/// The results of one kernel on a ray set.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Results {
+    /// Closest hits.
+    Hits(Vec<Hit>),
+    /// Occlusion flags.
+    Occluded(Vec<bool>),
+}
+
+impl Results {
+    /// A buffer of `n` results of `kernel`'s query.
+    pub fn for_kernel(kernel: &Kernel, n: usize) -> Results {
+        match kernel.query {
+            Query::Intersect(_) => Results::Hits(vec![Hit::MISS; n]),
+            Query::Occluded(_) => Results::Occluded(vec![false; n]),
+        }
+    }
+
+    /// Rays that hit something (closest hit) or are blocked (occlusion).
+    pub fn hit_count(&self) -> usize {
+        match self {
+            Results::Hits(h) => h.iter().filter(|h| h.is_hit()).count(),
+            Results::Occluded(o) => o.iter().filter(|&&b| b).count(),
+        }
+    }
+}
+
+fn reference_intersect1(scene: &Scene, rays: &[Ray], hits: &mut [Hit]) {
+    for (r, h) in rays.iter().zip(hits) {
+        *h = scene.intersect1_reference(r);
+    }
+}
+
+fn reference_occluded1(scene: &Scene, rays: &[Ray], out: &mut [bool]) {
+    for (r, o) in rays.iter().zip(out) {
+        *o = scene.occluded1_reference(r);
+    }
+}
+
+fn intersect1(scene: &Scene, rays: &[Ray], hits: &mut [Hit]) {
+    for (r, h) in rays.iter().zip(hits) {
+        *h = scene.intersect1(r);
+    }
+}
+
+fn occluded1(scene: &Scene, rays: &[Ray], out: &mut [bool]) {
+    for (r, o) in rays.iter().zip(out) {
+        *o = scene.occluded1(r);
+    }
+}
+
+macro_rules! packet_kernels {
+    ($intersect:ident, $occluded:ident, $packet:ty, $k:expr) => {
+        fn $intersect(scene: &Scene, rays: &[Ray], hits: &mut [Hit]) {
+            for (r, h) in rays.chunks($k).zip(hits.chunks_mut($k)) {
+                let (mut p, valid) = <$packet>::from_rays(r);
+                scene.$intersect(&mut p, valid);
+                for (i, out) in h.iter_mut().enumerate() {
+                    *out = p.hit(i);
+                }
+            }
+        }
+
+        fn $occluded(scene: &Scene, rays: &[Ray], out: &mut [bool]) {
+            for (r, o) in rays.chunks($k).zip(out.chunks_mut($k)) {
+                let (p, valid) = <$packet>::from_rays(r);
+                let bits = scene.$occluded(&p, valid);
+                for (i, x) in o.iter_mut().enumerate() {
+                    *x = bits >> i & 1 != 0;
+                }
+            }
+        }
+    };
+}
+
+packet_kernels!(intersect8, occluded8, RayPacket8, 8);
+packet_kernels!(intersect16, occluded16, RayPacket16, 16);
+
+fn intersect_stream(scene: &Scene, rays: &[Ray], hits: &mut [Hit]) {
+    scene.intersect_batch(rays, hits);
+}
+
+fn occluded_stream(scene: &Scene, rays: &[Ray], out: &mut [bool]) {
+    scene.occluded_batch(rays, out);
+}
+
+/// Every ray query of [`Scene`], one line per kernel, the scalar references first. Packet
+/// kernels receive consecutive rays (4 x 4 pixel tiles for camera rays); the stream kernels
+/// are what [`Scene::intersect_stream`] and [`Scene::occluded_stream`] run on each thread's
+/// share of the rays.
+pub const KERNELS: &[Kernel] = &[
+    Kernel { name: "bvh2 reference intersect1", query: Query::Intersect(reference_intersect1), simd: false },
+    Kernel { name: "bvh2 reference occluded1", query: Query::Occluded(reference_occluded1), simd: false },
+    Kernel { name: "Scene::intersect1", query: Query::Intersect(intersect1), simd: true },
+    Kernel { name: "Scene::occluded1", query: Query::Occluded(occluded1), simd: true },
+    Kernel { name: "Scene::intersect8", query: Query::Intersect(intersect8), simd: true },
+    Kernel { name: "Scene::occluded8", query: Query::Occluded(occluded8), simd: true },
+    Kernel { name: "Scene::intersect16", query: Query::Intersect(intersect16), simd: true },
+    Kernel { name: "Scene::occluded16", query: Query::Occluded(occluded16), simd: true },
+    Kernel { name: "Scene::intersect_stream", query: Query::Intersect(intersect_stream), simd: true },
+    Kernel { name: "Scene::occluded_stream", query: Query::Occluded(occluded_stream), simd: true },
+];
+
+/// The SIMD kernels of [`KERNELS`] (those that run on the scene's ISA).
+pub fn simd_kernels() -> impl Iterator<Item = &'static Kernel> {
+    KERNELS.iter().filter(|k| k.simd)
+}

@@ -1,0 +1,261 @@
+//! SIMD lanes: the [`Lanes`] trait every kernel is written against, its implementations per
+//! instruction set, and the run-time choice of instruction set ([`Isa`]).
+//!
+//! Kernels are written once, generic over a set of lane types ([`IsaLanes`]: 4, 8 and 16
+//! lanes of `f32`), and instantiated per instruction set behind `#[target_feature]` entry
+//! points ([`isa`]), as Embree compiles its kernels once per ISA and picks one at run time.
+//! A plain build (no `-C target-cpu`) therefore carries SSE2, AVX2 and AVX-512 kernels and
+//! uses the best the CPU has.
+//!
+//! | ISA ([`Isa`]) | 4 lanes | 8 lanes | 16 lanes |
+//! |---|---|---|---|
+//! | `Baseline` (SSE2 on x86-64) | `wide::f32x4` | `wide::f32x8` | `wide::f32x16` |
+//! | `Avx2` (AVX2, FMA, BMI) | `wide::f32x4` (VEX) | one `__m256` | two `__m256` |
+//! | `Avx512` (F, VL, DQ, BW, CD) | `wide::f32x4` (VEX) | one `__m256` (EVEX) | one `__m512` |
+//!
+//! The baseline uses the `wide` crate, which compiles for the build's own target features
+//! (SSE2 by default, NEON on AArch64); the higher tiers wrap `core::arch` intrinsics
+//! ([`x86`]), because `wide` picks its implementation when it is compiled, not at run time.
+//!
+//! Masks follow `wide`'s convention: a lane is "true" when all its bits are one (the result
+//! of a comparison), "false" when all are zero. Comparisons are IEEE ordered: any NaN operand
+//! gives "false", exactly as the scalar `<`, `<=` of the reference kernels do, which keeps
+//! every SIMD kernel bit-compatible with its scalar twin whatever the ISA. No kernel uses
+//! fused multiply-adds, for the same reason.
+
+use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
+
+pub mod isa;
+mod portable;
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod x86;
+
+pub use isa::{Baseline, Isa, IsaError, IsaLanes};
+pub use wide::{f32x4, f32x8, f32x16, i32x4, i32x8, i32x16};
+
+/// 4 lanes of `f32` of the baseline ISA (an SSE register in a default x86-64 build).
+pub type F32x4 = f32x4;
+/// 8 lanes of `f32` of the baseline ISA: the width N of a BVH8 node.
+pub type F32x8 = f32x8;
+/// 16 lanes of `f32` of the baseline ISA: the width K of a [`crate::RayPacket16`].
+pub type F32x16 = f32x16;
+
+/// A vector of `f32` lanes with the operations the kernels use. Implemented by the lane
+/// types of every ISA (see the module docs); kernels never assume which.
+pub trait Lanes:
+    Copy
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+    + BitAnd<Output = Self>
+    + BitOr<Output = Self>
+    + Not<Output = Self>
+    + std::fmt::Debug
+{
+    /// Number of lanes.
+    const LANES: usize;
+    /// Every lane `x`.
+    fn splat(x: f32) -> Self;
+    /// Loads `LANES` values from the start of `s` (panics when `s` is shorter).
+    fn load(s: &[f32]) -> Self;
+    /// Stores into the first `LANES` elements of `s` (panics when `s` is shorter).
+    fn store(self, s: &mut [f32]);
+    /// Lane `i`.
+    fn lane(self, i: usize) -> f32;
+    /// `self < o` per lane.
+    fn lt(self, o: Self) -> Self;
+    /// `self <= o` per lane.
+    fn le(self, o: Self) -> Self;
+    /// `self > o` per lane.
+    fn gt(self, o: Self) -> Self;
+    /// `self >= o` per lane.
+    fn ge(self, o: Self) -> Self;
+    /// `self == o` per lane.
+    fn eq(self, o: Self) -> Self;
+    /// Lanes of `t` where `self` is true, of `f` elsewhere.
+    fn select(self, t: Self, f: Self) -> Self;
+    /// Bit `i` set when lane `i` of the mask is true.
+    fn bitmask(self) -> u32;
+    /// The mask whose lane `i` is true when bit `i` of `bits` is set.
+    fn from_bitmask(bits: u32) -> Self;
+    /// `min` with `minps` semantics (`self < o ? self : o`; no NaN handling).
+    fn vmin(self, o: Self) -> Self;
+    /// `max` with `maxps` semantics (`self > o ? self : o`; no NaN handling).
+    fn vmax(self, o: Self) -> Self;
+    /// True lanes where the value is finite.
+    fn is_finite(self) -> Self;
+    /// Correctly rounded square root.
+    fn sqrt(self) -> Self;
+    /// Smallest lane (lanes must not be NaN).
+    fn reduce_min(self) -> f32;
+    /// Largest lane (lanes must not be NaN).
+    fn reduce_max(self) -> f32;
+
+    /// Magnitude of each lane (the sign bit cleared).
+    #[inline(always)]
+    fn abs(self) -> Self {
+        self & !Self::splat(-0.0)
+    }
+
+    /// Magnitude of `self` with the sign of `sign`.
+    #[inline(always)]
+    fn copysign(self, sign: Self) -> Self {
+        let s = Self::splat(-0.0);
+        (self & !s) | (sign & s)
+    }
+
+    /// The lanes as an array (only the first `LANES` entries are meaningful).
+    #[inline(always)]
+    fn to_array(self) -> [f32; 16] {
+        let mut a = [0.0f32; 16];
+        self.store(&mut a);
+        a
+    }
+}
+
+/// 8 lanes that can be transposed as an 8 x 8 matrix (rays into packet rows).
+pub trait Transpose8: Lanes {
+    /// The transpose of the matrix whose rows are `rows`.
+    fn transpose8(rows: [Self; 8]) -> [Self; 8];
+}
+
+impl Transpose8 for F32x8 {
+    #[inline(always)]
+    fn transpose8(rows: [Self; 8]) -> [Self; 8] {
+        F32x8::transpose(rows)
+    }
+}
+
+/// A 3-vector of lanes (structure of arrays): lane `i` of `x`, `y`, `z` is one vector.
+#[derive(Clone, Copy, Debug)]
+pub struct Vec3x<V> {
+    /// x components.
+    pub x: V,
+    /// y components.
+    pub y: V,
+    /// z components.
+    pub z: V,
+}
+
+impl<V: Lanes> Vec3x<V> {
+    /// Every lane `v`.
+    #[inline(always)]
+    pub fn splat(v: crate::math::Vec3) -> Self {
+        Self { x: V::splat(v.x), y: V::splat(v.y), z: V::splat(v.z) }
+    }
+
+    /// Lane-wise cross product, with the operation order of `glam::Vec3::cross` so that
+    /// each lane is bit-identical to the scalar result.
+    #[inline(always)]
+    pub fn cross(self, o: Self) -> Self {
+        Self { x: self.y * o.z - o.y * self.z, y: self.z * o.x - o.z * self.x, z: self.x * o.y - o.x * self.y }
+    }
+
+    /// Lane-wise dot product, summed in the order of `glam::Vec3::dot`.
+    #[inline(always)]
+    pub fn dot(self, o: Self) -> V {
+        self.x * o.x + self.y * o.y + self.z * o.z
+    }
+
+    /// Lane `i` as a scalar vector.
+    #[inline(always)]
+    pub fn lane(self, i: usize) -> crate::math::Vec3 {
+        crate::math::Vec3::new(self.x.lane(i), self.y.lane(i), self.z.lane(i))
+    }
+}
+
+impl<V: Lanes> Sub for Vec3x<V> {
+    type Output = Self;
+    /// Lane-wise difference.
+    #[inline(always)]
+    fn sub(self, o: Self) -> Self {
+        Self { x: self.x - o.x, y: self.y - o.y, z: self.z - o.z }
+    }
+}
+
+/// Iterates over the indices of the set bits of `mask`, lowest first.
+#[inline(always)]
+pub fn bits(mut mask: u32) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        if mask == 0 {
+            None
+        } else {
+            let i = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            Some(i)
+        }
+    })
+}
+
+/// The lane operations checked on one lane type against scalar arithmetic (the unit tests of
+/// every ISA's lanes call this).
+#[cfg(test)]
+pub(crate) fn check_lanes<V: Lanes>() {
+    let n = V::LANES;
+    let pattern =
+        [1.0, 5.0, -2.0, f32::NAN, 0.0, 3.0, 3.0, 9.0, -0.0, f32::INFINITY, -7.5, 2.0, 3.0, 1e30, -1e-30, 4.0];
+    let a = V::load(&pattern);
+    let b = V::splat(3.0);
+    let want = |f: &dyn Fn(f32) -> bool| (0..n).filter(|&i| f(pattern[i])).fold(0u32, |m, i| m | 1 << i);
+    assert_eq!(a.lt(b).bitmask(), want(&|x| x < 3.0));
+    assert_eq!(a.le(b).bitmask(), want(&|x| x <= 3.0));
+    assert_eq!(a.gt(b).bitmask(), want(&|x| x > 3.0));
+    assert_eq!(a.ge(b).bitmask(), want(&|x| x >= 3.0), "NaN compares false");
+    assert_eq!(a.eq(b).bitmask(), want(&|x| x == 3.0));
+    assert_eq!(a.is_finite().bitmask(), want(&|x| x.is_finite()));
+    let all = if n == 32 { u32::MAX } else { (1u32 << n) - 1 };
+    for bits in [0, 1, 0xA5C3 & all, all, 0x8000_0001 & all] {
+        assert_eq!(V::from_bitmask(bits).bitmask(), bits);
+        assert_eq!((!V::from_bitmask(bits)).bitmask(), !bits & all);
+    }
+    let m = a.gt(b);
+    let s = m.select(a, b).to_array();
+    let (arr, mn, mx) = (a.to_array(), a.vmin(b).to_array(), a.vmax(b).to_array());
+    let (sum, quo, neg) = ((a + b).to_array(), (a / b).to_array(), (-a).to_array());
+    let (sq, cs) = (a.abs().sqrt().to_array(), b.copysign(a).to_array());
+    for i in 0..n {
+        let x = pattern[i];
+        assert_eq!(arr[i].to_bits(), x.to_bits());
+        assert_eq!(a.lane(i).to_bits(), x.to_bits());
+        assert_eq!(s[i].to_bits(), if x > 3.0 { x } else { 3.0f32 }.to_bits());
+        assert_eq!(mn[i].to_bits(), if x < 3.0 { x } else { 3.0f32 }.to_bits(), "minps semantics");
+        assert_eq!(mx[i].to_bits(), if x > 3.0 { x } else { 3.0f32 }.to_bits(), "maxps semantics");
+        assert_eq!(sum[i].to_bits(), (x + 3.0).to_bits());
+        assert_eq!(quo[i].to_bits(), (x / 3.0).to_bits());
+        assert_eq!(neg[i].to_bits(), (-x).to_bits());
+        assert_eq!(sq[i].to_bits(), x.abs().sqrt().to_bits());
+        assert_eq!(cs[i].to_bits(), 3.0f32.copysign(x).to_bits());
+    }
+    let mut out = [0.0f32; 16];
+    (a * b - b).store(&mut out);
+    for i in 0..n {
+        assert_eq!(out[i].to_bits(), (pattern[i] * 3.0 - 3.0).to_bits());
+    }
+    let finite: Vec<f32> = (0..n).map(|i| ((i * 7 + 3) % 11) as f32 - 4.5).collect();
+    for k in 0..n {
+        let mut v = finite.clone();
+        v[k] = -50.0;
+        v[n - 1 - k] = if n - 1 - k == k { -50.0 } else { 60.0 };
+        let x = V::load(&v);
+        let (lo, hi) = v.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+        assert_eq!((x.reduce_min(), x.reduce_max()), (lo, hi));
+    }
+    let bit_and = (V::from_bitmask(0b1010) & V::from_bitmask(0b0110)).bitmask();
+    let bit_or = (V::from_bitmask(0b1010) | V::from_bitmask(0b0110)).bitmask();
+    assert_eq!((bit_and, bit_or), (0b0010 & all, 0b1110 & all));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn portable_lanes() {
+        check_lanes::<F32x4>();
+        check_lanes::<F32x8>();
+        check_lanes::<F32x16>();
+        assert_eq!(bits(0b1010_0001).collect::<Vec<_>>(), vec![0, 5, 7]);
+    }
+}
