@@ -178,11 +178,23 @@ pub struct BenchSettings {
     /// The ISA tier to run raypack's kernels on, and the highest Embree may use; `None`
     /// keeps the scene's tier and lets Embree pick its best.
     pub isa: Option<Isa>,
+    /// Time only the methods whose name contains one of these (all when empty); the
+    /// reference still runs once per set for the checksums.
+    pub methods: Vec<String>,
 }
 
 impl Default for BenchSettings {
     fn default() -> Self {
-        Self { width: 1024, height: 768, runs: 5, against_embree: false, threads: vec![1, 0], seed: 1, isa: None }
+        Self {
+            width: 1024,
+            height: 768,
+            runs: 5,
+            against_embree: false,
+            threads: vec![1, 0],
+            seed: 1,
+            isa: None,
+            methods: Vec::new(),
+        }
     }
 }
 
@@ -337,7 +349,10 @@ pub fn run_bench(
                 .num_threads(threads)
                 .build()
                 .map_err(|e| BenchError::Settings(e.to_string()))?;
-            for m in methods.iter().filter(|m| m.run.is_occlusion() == occlusion) {
+            let wanted = |m: &&Method<'_>| {
+                settings.methods.is_empty() || settings.methods.iter().any(|f| m.name.contains(f.as_str()))
+            };
+            for m in methods.iter().filter(|m| m.run.is_occlusion() == occlusion).filter(wanted) {
                 let mut out = output_for(&m.run, set.rays.len());
                 let (reps, times) = pool.install(|| {
                     let t0 = Instant::now();

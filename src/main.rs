@@ -51,6 +51,13 @@ struct BenchArgs {
     /// Timed runs per method (the median is reported), after one warm-up run.
     #[arg(long, default_value_t = 5)]
     runs: usize,
+    /// Thread counts to time at, comma-separated (0: all cores; default: 1 and all).
+    #[arg(short = 't', long = "threads", value_delimiter = ',')]
+    threads: Vec<usize>,
+    /// Time only the methods whose name contains one of these, comma-separated (e.g.
+    /// `stream,rtcIntersect8`).
+    #[arg(long, value_delimiter = ',')]
+    methods: Vec<String>,
     /// raypack's BVH build effort.
     #[arg(long, value_enum, default_value_t = QualityArg::Medium)]
     quality: QualityArg,
@@ -492,6 +499,8 @@ fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
         runs: a.runs,
         against_embree: a.against.is_some(),
         isa: a.isa,
+        methods: a.methods.clone(),
+        threads: if a.threads.is_empty() { vec![1, 0] } else { a.threads.clone() },
         ..Default::default()
     };
     if settings.against_embree && !cfg!(feature = "embree") {

@@ -331,3 +331,62 @@ impl<T: TriBlock> Bvh8<T> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Sphere4;
+    use crate::math::{Aabb, Vec3};
+    use crate::simd::isa::{IsaOp, dispatch};
+
+    /// The node and sphere-block tests of every ISA tier against their scalar twins.
+    struct NodeAndSpheresMatchScalar;
+    impl IsaOp for NodeAndSpheresMatchScalar {
+        type Output = (u32, u32);
+        #[inline(always)]
+        fn run<I: IsaLanes>(self) -> (u32, u32) {
+            let mut rng = crate::render::sampler::Rng::new(5, 9);
+            let mut r3 = move || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - 2.0;
+            let (mut boxes_hit, mut spheres_hit) = (0, 0);
+            for k in 0..4000 {
+                let mut n = Bvh8Node::EMPTY;
+                for i in 0..(k % 9) {
+                    n.set_child(i, &Aabb::new(r3(), r3()), NodeRef::inner(i as u32));
+                }
+                let mut dir = r3();
+                if k % 4 == 0 {
+                    dir[k % 3] = if k % 8 == 0 { 0.0 } else { -0.0 };
+                }
+                let ray = Ray::segment(r3() * 2.0, dir, (k % 3) as f32 * 0.25, if k % 5 == 0 { 2.0 } else { f32::INFINITY });
+                if !ray.is_valid() {
+                    continue;
+                }
+                let r = Ray1::<I::F8>::new(&ray);
+                for tfar in [ray.tfar, 1.0f32.max(ray.tnear)] {
+                    let (mask, _) = r.intersect_node(&n, tfar);
+                    assert_eq!(mask, r.intersect_node_scalar(&n, tfar), "{}: {ray:?}", I::ISA);
+                    boxes_hit += mask.count_ones();
+                }
+                let mut s = Sphere4::EMPTY;
+                for i in 0..(k % 5) {
+                    s.set(i, r3(), (k % 7) as f32 * 0.2, i as u32);
+                }
+                let (mask, t) = s.intersect1::<I::F4>(ray.origin, ray.dir, ray.tnear, ray.tfar);
+                for (i, want) in s.intersect1_scalar(ray.origin, ray.dir, ray.tnear, ray.tfar).iter().enumerate() {
+                    let got = (mask >> i & 1 != 0).then(|| t.lane(i));
+                    assert_eq!(got.map(f32::to_bits), want.map(f32::to_bits), "{}: sphere {i} of {ray:?}", I::ISA);
+                }
+                spheres_hit += mask.count_ones();
+            }
+            (boxes_hit, spheres_hit)
+        }
+    }
+
+    #[test]
+    fn node_and_sphere_tests_match_scalar_on_every_isa() {
+        for isa in crate::simd::Isa::available() {
+            let (boxes, spheres) = dispatch(isa, NodeAndSpheresMatchScalar);
+            assert!(boxes > 1000 && spheres > 100, "{isa}: the cases must hit ({boxes} boxes, {spheres} spheres)");
+        }
+    }
+}

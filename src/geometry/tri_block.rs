@@ -480,4 +480,114 @@ mod tests {
         let hits = b.intersect1(&Vec3x::splat(Vec3::Z), &Vec3x::splat(-Vec3::Z), F32x4::splat(0.0), F32x4::splat(9.0));
         assert_eq!(hits.mask, 0b10);
     }
+
+    /// Random triangles (some degenerate, some sharing vertices) and rays aimed at them.
+    fn cases(seed: u64) -> Vec<(Ray, [[Vec3; 3]; 8])> {
+        let mut rng = crate::render::sampler::Rng::new(seed, 3);
+        let mut r3 = move || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - 2.0;
+        (0..3000)
+            .map(|k| {
+                let tris: [[Vec3; 3]; 8] = std::array::from_fn(|i| {
+                    let (a, b, c) = (r3(), r3(), r3());
+                    match (k + i) % 9 {
+                        0 => [a, a, c],
+                        1 => [a, b, a + (b - a) * 0.5],
+                        _ => [a, b * 0.5, c * 0.5],
+                    }
+                });
+                let target = match k % 3 {
+                    0 => tris[k % 8][0],
+                    1 => (tris[k % 8][1] + tris[k % 8][2]) * 0.5,
+                    _ => r3() * 0.5,
+                };
+                let origin = r3() * 2.0;
+                let tn = if k % 5 == 0 { 0.5 } else { 0.0 };
+                let tf = if k % 7 == 0 { 1.0 } else { f32::INFINITY };
+                (Ray::segment(origin, target - origin, tn, tf), tris)
+            })
+            .collect()
+    }
+
+    /// The block kernels of every ISA tier against their scalar twins, bit for bit: one ray
+    /// against blocks of 4 and 8 triangles (both layouts), 16 and 8 rays against one triangle.
+    struct BlocksMatchScalar(u64);
+    impl crate::simd::isa::IsaOp for BlocksMatchScalar {
+        type Output = usize;
+        #[inline(always)]
+        fn run<I: IsaLanes>(self) -> usize {
+            let bits = |h: Option<(f32, f32, f32)>| h.map(|(t, u, v)| (t.to_bits(), u.to_bits(), v.to_bits()));
+            let mut hits = 0;
+            for (ray, tris) in cases(self.0) {
+                let (mut b8, mut w8, mut b4) = (Tri8::EMPTY, Tri8::EMPTY, Tri4::EMPTY);
+                for (i, t) in tris.iter().enumerate() {
+                    b8.set(i, t[0], t[1], t[2], i as u32);
+                    w8.set_vertices(i, t[0], t[1], t[2], i as u32);
+                    if i < 4 {
+                        b4.set(i, t[0], t[1], t[2], i as u32);
+                    }
+                }
+                let (tn8, tf8) = (I::F8::splat(ray.tnear), I::F8::splat(ray.tfar));
+                let mt = MollerTrumboreKernel::block(&b8, &MollerTrumboreKernel::ray1::<I::F8>(&ray), tn8, tf8);
+                let wt = WatertightKernel::block(&w8, &WatertightKernel::ray1::<I::F8>(&ray), tn8, tf8);
+                let (tn4, tf4) = (I::F4::splat(ray.tnear), I::F4::splat(ray.tfar));
+                let m4 = MollerTrumboreKernel::block(&b4, &MollerTrumboreKernel::ray1::<I::F4>(&ray), tn4, tf4);
+                for (i, t) in tris.iter().enumerate() {
+                    let lane =
+                        |h: &BlockHits<_>| (h.mask >> i & 1 != 0).then(|| (h.t.lane(i), h.u.lane(i), h.v.lane(i)));
+                    let want = MollerTrumboreKernel::scalar(&ray, ray.tfar, t[0], t[1], t[2]);
+                    hits += want.is_some() as usize;
+                    assert_eq!(bits(lane(&mt)), bits(want), "{}: M-T lane {i} of {ray:?}", I::ISA);
+                    if i < 4 {
+                        assert_eq!(bits(lane(&m4)), bits(want), "{}: M-T M=4 lane {i} of {ray:?}", I::ISA);
+                    }
+                    let want = WatertightKernel::scalar(&ray, ray.tfar, t[0], t[1], t[2]);
+                    assert_eq!(bits(lane(&wt)), bits(want), "{}: watertight lane {i} of {ray:?}", I::ISA);
+                }
+                // The other direction: K rays (the same ray, shifted per lane) against one triangle.
+                let rays: [Ray; 16] =
+                    std::array::from_fn(|k| Ray { origin: ray.origin + Vec3::splat(k as f32 * 0.01), ..ray });
+                let rows = crate::ray::transpose_rays_in::<I::F8>(&rays);
+                let row = |k: usize| Vec3x {
+                    x: I::F16::load(&rows[k]),
+                    y: I::F16::load(&rows[k + 1]),
+                    z: I::F16::load(&rows[k + 2]),
+                };
+                let (org, dir) = (row(0), row(3));
+                let (tn, tf) = (I::F16::load(&rows[6]), I::F16::load(&rows[7]));
+                let tri = &tris[0];
+                let (m, t, u, v) = MollerTrumboreKernel::broadcast(
+                    &[tri[0], tri[1] - tri[0], tri[2] - tri[0]],
+                    &MollerTrumboreKernel::ray_k(&org, &dir),
+                    tn,
+                    tf,
+                );
+                let (wm, wt, wu, wv) = WatertightKernel::broadcast(tri, &WatertightKernel::ray_k(&org, &dir), tn, tf);
+                for (k, r) in rays.iter().enumerate() {
+                    let got = (m.bitmask() >> k & 1 != 0).then(|| (t.lane(k), u.lane(k), v.lane(k)));
+                    assert_eq!(
+                        bits(got),
+                        bits(MollerTrumboreKernel::scalar(r, r.tfar, tri[0], tri[1], tri[2])),
+                        "{}: M-T packet lane {k}",
+                        I::ISA
+                    );
+                    let got = (wm.bitmask() >> k & 1 != 0).then(|| (wt.lane(k), wu.lane(k), wv.lane(k)));
+                    assert_eq!(
+                        bits(got),
+                        bits(WatertightKernel::scalar(r, r.tfar, tri[0], tri[1], tri[2])),
+                        "{}: watertight packet lane {k}",
+                        I::ISA
+                    );
+                }
+            }
+            hits
+        }
+    }
+
+    #[test]
+    fn block_kernels_match_scalar_on_every_isa() {
+        for isa in crate::simd::Isa::available() {
+            let hits = crate::simd::isa::dispatch(isa, BlocksMatchScalar(11));
+            assert!(hits > 2000, "{isa}: the cases must hit ({hits} hits)");
+        }
+    }
 }
