@@ -357,7 +357,8 @@ mod tests {
                 if k % 4 == 0 {
                     dir[k % 3] = if k % 8 == 0 { 0.0 } else { -0.0 };
                 }
-                let ray = Ray::segment(r3() * 2.0, dir, (k % 3) as f32 * 0.25, if k % 5 == 0 { 2.0 } else { f32::INFINITY });
+                let ray =
+                    Ray::segment(r3() * 2.0, dir, (k % 3) as f32 * 0.25, if k % 5 == 0 { 2.0 } else { f32::INFINITY });
                 if !ray.is_valid() {
                     continue;
                 }

@@ -532,16 +532,17 @@ mod tests {
                 let (tn4, tf4) = (I::F4::splat(ray.tnear), I::F4::splat(ray.tfar));
                 let m4 = MollerTrumboreKernel::block(&b4, &MollerTrumboreKernel::ray1::<I::F4>(&ray), tn4, tf4);
                 for (i, t) in tris.iter().enumerate() {
-                    let lane =
-                        |h: &BlockHits<_>| (h.mask >> i & 1 != 0).then(|| (h.t.lane(i), h.u.lane(i), h.v.lane(i)));
+                    fn lane<V: Lanes>(h: &BlockHits<V>, i: usize) -> Option<(f32, f32, f32)> {
+                        (h.mask >> i & 1 != 0).then(|| (h.t.lane(i), h.u.lane(i), h.v.lane(i)))
+                    }
                     let want = MollerTrumboreKernel::scalar(&ray, ray.tfar, t[0], t[1], t[2]);
                     hits += want.is_some() as usize;
-                    assert_eq!(bits(lane(&mt)), bits(want), "{}: M-T lane {i} of {ray:?}", I::ISA);
+                    assert_eq!(bits(lane(&mt, i)), bits(want), "{}: M-T lane {i} of {ray:?}", I::ISA);
                     if i < 4 {
-                        assert_eq!(bits(lane(&m4)), bits(want), "{}: M-T M=4 lane {i} of {ray:?}", I::ISA);
+                        assert_eq!(bits(lane(&m4, i)), bits(want), "{}: M-T M=4 lane {i} of {ray:?}", I::ISA);
                     }
                     let want = WatertightKernel::scalar(&ray, ray.tfar, t[0], t[1], t[2]);
-                    assert_eq!(bits(lane(&wt)), bits(want), "{}: watertight lane {i} of {ray:?}", I::ISA);
+                    assert_eq!(bits(lane(&wt, i)), bits(want), "{}: watertight lane {i} of {ray:?}", I::ISA);
                 }
                 // The other direction: K rays (the same ray, shifted per lane) against one triangle.
                 let rays: [Ray; 16] =
