@@ -63,6 +63,7 @@ pub mod geometry;
 pub mod info;
 pub mod io;
 pub mod math;
+pub mod memory;
 pub mod ray;
 pub mod raysets;
 pub mod render;
