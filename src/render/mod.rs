@@ -20,7 +20,7 @@ pub mod spawn;
 pub mod stats;
 pub mod trace;
 
-pub use film::{Encoding, Film, ImageError};
+pub use film::{Encoding, Film, ImageError, ImageFormat};
 pub use integrator::IntegratorKind;
 pub use stats::{RayCounts, RayKind, RayLog};
 
@@ -110,8 +110,9 @@ pub struct RenderOutput {
     pub stats: RenderStats,
 }
 
-/// Samples per pixel per pass without adaptive sampling (bounds the per-tile buffers).
-const PASS_SAMPLES: u32 = 16;
+/// Samples per pixel per pass: bounds the per-tile buffers, whatever `-s` and the adaptive
+/// batch size (a batch larger than this is taken in several passes).
+pub const PASS_SAMPLES: u32 = 16;
 
 /// Renders `scene` through `camera`. `progress` is called with the number of tiles done
 /// each time a tile completes.
@@ -189,62 +190,69 @@ fn render_tile(
     let tw = x1 - x0;
     let npix = tw * (y1 - y0);
     let spp = settings.samples_per_pixel.max(1);
+    // Convergence is tested after every batch (CS184's samplesPerBatch); a batch is taken in
+    // passes of at most PASS_SAMPLES samples per pixel, so the buffers stay small.
     let batch = match settings.adaptive {
-        Some((b, _)) => b.max(1).min(spp),
-        None => spp.min(PASS_SAMPLES),
+        Some((b, _)) => b.clamp(1, spp),
+        None => spp,
     };
+    let pass = PASS_SAMPLES.min(spp);
     let centre_only = spp == 1;
     let mut pixels = vec![PixelEstimate::default(); npix];
     // Per-pass buffers, sized once for the largest pass.
-    let cap = npix * batch as usize;
+    let cap = npix * pass as usize;
     let mut rays: Vec<Ray> = Vec::with_capacity(cap);
     let mut rngs: Vec<Rng> = Vec::with_capacity(cap);
     let mut owner: Vec<u32> = Vec::with_capacity(cap);
     let mut hits: Vec<Hit> = Vec::with_capacity(cap);
     let mut log = RayLog::default();
     let (mut invalid, mut camera_time, mut shading_time) = (0u64, Duration::ZERO, Duration::ZERO);
-    loop {
-        let t0 = Instant::now();
-        rays.clear();
-        rngs.clear();
-        owner.clear();
-        for (i, est) in pixels.iter().enumerate() {
-            if est.done {
-                continue;
+    // Every pixel still sampling has taken `taken` samples: all start together and a batch
+    // adds the same number to each.
+    let mut taken = 0u32;
+    while taken < spp && pixels.iter().any(|p| !p.done) {
+        let batch_end = taken.saturating_add(batch).min(spp);
+        while taken < batch_end {
+            let pass_end = taken.saturating_add(pass).min(batch_end);
+            let t0 = Instant::now();
+            rays.clear();
+            rngs.clear();
+            owner.clear();
+            for (i, est) in pixels.iter().enumerate() {
+                if est.done {
+                    continue;
+                }
+                let (x, y) = (x0 + i % tw, y0 + i / tw);
+                for s in taken..pass_end {
+                    let mut rng = Rng::new(settings.seed, sample_stream(y * w + x, s));
+                    // One sample goes through the pixel centre; more are jittered uniformly.
+                    let (jx, jy) = if centre_only { (0.5, 0.5) } else { rng.next_2d() };
+                    let ray = camera.ray(x as f32 + jx, y as f32 + jy, w, h);
+                    log.record(RayKind::Camera, &ray);
+                    rays.push(ray);
+                    rngs.push(rng);
+                    owner.push(i as u32);
+                }
             }
-            let (x, y) = (x0 + i % tw, y0 + i / tw);
-            let first = est.n;
-            for s in first..(first + batch).min(spp) {
-                let mut rng = Rng::new(settings.seed, sample_stream(y * w + x, s));
-                // One sample goes through the pixel centre; more are jittered uniformly.
-                let (jx, jy) = if centre_only { (0.5, 0.5) } else { rng.next_2d() };
-                let ray = camera.ray(x as f32 + jx, y as f32 + jy, w, h);
-                log.record(RayKind::Camera, &ray);
-                rays.push(ray);
-                rngs.push(rng);
-                owner.push(i as u32);
+            hits.clear();
+            hits.resize(rays.len(), Hit::MISS);
+            integrator.tracer().closest_batch(&rays, &mut hits);
+            let t1 = Instant::now();
+            for ((ray, hit), (rng, &i)) in rays.iter().zip(&hits).zip(rngs.iter_mut().zip(&owner)) {
+                let mut l = integrator.radiance(ray, hit, rng, &mut log);
+                if !l.is_finite() {
+                    invalid += 1;
+                    l = Vec3::ZERO;
+                }
+                pixels[i as usize].add(l);
             }
-        }
-        if rays.is_empty() {
-            break;
-        }
-        hits.clear();
-        hits.resize(rays.len(), Hit::MISS);
-        integrator.tracer().closest_batch(&rays, &mut hits);
-        let t1 = Instant::now();
-        for ((ray, hit), (rng, &i)) in rays.iter().zip(&hits).zip(rngs.iter_mut().zip(&owner)) {
-            let mut l = integrator.radiance(ray, hit, rng, &mut log);
-            if !l.is_finite() {
-                invalid += 1;
-                l = Vec3::ZERO;
-            }
-            pixels[i as usize].add(l);
+            camera_time += t1 - t0;
+            shading_time += t1.elapsed();
+            taken = pass_end;
         }
         for est in &mut pixels {
             est.done = est.n >= spp || settings.adaptive.is_some_and(|(_, tol)| est.converged(tol));
         }
-        camera_time += t1 - t0;
-        shading_time += t1.elapsed();
     }
     TileResult { pixels, log, invalid_samples: invalid, camera_time, shading_time }
 }
