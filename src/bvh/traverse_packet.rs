@@ -48,12 +48,13 @@
 //! * for shadow rays the frustum-only kernel: 3.86, the hybrid without prefilter: 7.53,
 //!   with: 8.12 (Embree's best, `rtcOccluded16`: 5.18).
 
+use crate::bvh::BVH8_STACK;
 use crate::bvh::bvh2::SLAB_WIDEN;
+use crate::bvh::bvh8::Bvh8Ref;
 use crate::bvh::counters::{Counter, Work};
 use crate::bvh::frustum::Frustum;
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
 use crate::bvh::traverse1::Ray1;
-use crate::bvh::{BVH8_STACK, Bvh8};
 use crate::geometry::sphere_block::sphere_lanes;
 use crate::geometry::{TriBlock, TriangleKernel, TriangleTest};
 use crate::ray::{Hit, Ray};
@@ -217,7 +218,7 @@ impl<V: Lanes> PacketRays<V> {
     #[inline(always)]
     fn intersect_leaf<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
         &mut self,
-        bvh: &Bvh8<T>,
+        bvh: &Bvh8Ref<'_, T>,
         leaf: NodeRef,
         active: u32,
         fr: Option<&Frustum<I::F8>>,
@@ -259,7 +260,7 @@ impl<V: Lanes> PacketRays<V> {
     #[inline(always)]
     fn occluded_leaf<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
         &self,
-        bvh: &Bvh8<T>,
+        bvh: &Bvh8Ref<'_, T>,
         leaf: NodeRef,
         active: u32,
         cache: &mut OccluderCache,
@@ -313,7 +314,7 @@ impl<V: Lanes> PacketRays<V> {
 /// wanted rays against one triangle at a time.
 #[inline(always)]
 pub fn intersect_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
-    bvh: &Bvh8<T>,
+    bvh: &Bvh8Ref<'_, T>,
     rays: &mut PacketRays<V>,
     threshold: usize,
     counter: &mut C,
@@ -486,7 +487,7 @@ const LEAVES_FIRST: bool = true;
 /// wanted rays against one triangle at a time, leaf children of a node before its inner ones.
 #[inline(always)]
 pub fn occluded_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
-    bvh: &Bvh8<T>,
+    bvh: &Bvh8Ref<'_, T>,
     rays: &PacketRays<V>,
     threshold: usize,
     cache: &mut OccluderCache,

@@ -40,7 +40,8 @@ use crate::simd::{IsaLanes, Lanes, Vec3x};
 /// the reference's exact tests applied. The slack exceeds the two roundings that separate
 /// `u = U * (1/det)` from `U / det` (and the one of `U + V`), so the filter never rejects a
 /// lane the exact test would accept; lanes whose `|det|` is below 2^-100 (where `u` could
-/// round to `-0.0`) or whose `U, V, T` are not finite always pass it.
+/// round to `-0.0`) or whose `T` is not finite always pass it (a non-finite `U` or `V` fails the
+/// exact test as well).
 #[inline(always)]
 pub fn moller_trumbore<V: Lanes>(
     origin: &Vec3x<V>,
@@ -75,7 +76,9 @@ pub fn moller_trumbore<V: Lanes>(
         & (u1 + v1).le(hi)
         & t1.gt(tnear * a * V::splat(1.0 - SLACK))
         & t1.le(tfar * a * V::splat(1.0 + SLACK));
-    let doubtful = a.lt(V::splat(TINY_DET)) | !(uu.is_finite() & vv.is_finite() & tt.is_finite());
+    // A non-finite U or V fails the exact test too (u or v is then infinite or NaN), so only
+    // T needs the exact path when it is not finite (its f64 redo below).
+    let doubtful = a.lt(V::splat(TINY_DET)) | !tt.is_finite();
     if (det_ok & (maybe | doubtful)).bitmask() == 0 {
         return (zero, zero, zero, zero);
     }
