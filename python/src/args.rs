@@ -108,13 +108,14 @@ pub fn points<'a>(arr: &'a RealArray<'_>, name: &str, one_allowed: bool) -> PyRe
     };
     match shape {
         [_, 3] => Ok(match arr {
-            RealArray::F32(a) => match a.as_slice() {
-                Ok(rows) => Points::Rows32(rows),
-                Err(_) => Points::Strided32(a.as_array().into_dimensionality::<Ix2>().map_err(|_| bad())?),
+            // `to_slice`: only row-major (C-contiguous) arrays, not Fortran-ordered ones.
+            RealArray::F32(a) => match a.as_array().to_slice() {
+                Some(rows) => Points::Rows32(rows),
+                None => Points::Strided32(a.as_array().into_dimensionality::<Ix2>().map_err(|_| bad())?),
             },
-            RealArray::F64(a) => match a.as_slice() {
-                Ok(rows) => Points::Rows64(rows),
-                Err(_) => Points::Strided64(a.as_array().into_dimensionality::<Ix2>().map_err(|_| bad())?),
+            RealArray::F64(a) => match a.as_array().to_slice() {
+                Some(rows) => Points::Rows64(rows),
+                None => Points::Strided64(a.as_array().into_dimensionality::<Ix2>().map_err(|_| bad())?),
             },
         }),
         [3] if one_allowed => {

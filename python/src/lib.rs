@@ -246,7 +246,16 @@ impl PyScene {
         Ok(scene)
     }
 
-    /// Closest hits: ``(t, prim, u, v, normal)`` arrays as a ``Hits`` (see ``raypack.Scene.intersect``).
+    /// Closest hit of each ray ``origin + t * direction`` over ``t`` in ``(tnear, tfar]``, as a
+    /// ``Hits`` of arrays ``t, prim, u, v, normal``.
+    ///
+    /// ``origins`` and ``directions`` are ``(K, 3)`` real arrays (float32 and float64 are read
+    /// in place whatever their strides; one ``(3,)`` point stands for all rays); ``tnear``
+    /// (default 0) and ``tfar`` (default ``inf``) are numbers or ``(K,)`` arrays. Directions
+    /// need not be unit length: ``t`` is measured in units of their length. Rays with a
+    /// NaN/Inf component, a zero direction or ``tnear > tfar`` miss. Traced over ``threads``
+    /// threads (default: all cores) with the GIL released, as 16-ray packets in the order
+    /// given (keep coherent rays together).
     #[pyo3(signature = (origins, directions, tnear = None, tfar = None, *, threads = None))]
     fn intersect<'py>(
         &self,
@@ -291,7 +300,8 @@ impl PyScene {
         })
     }
 
-    /// Whether anything lies on each ray over ``(tnear, tfar]``: ``bool (K,)``.
+    /// Whether anything lies on each ray over ``(tnear, tfar]``: ``bool (K,)``. Arguments as
+    /// for ``intersect``.
     #[pyo3(signature = (origins, directions, tnear = None, tfar = None, *, threads = None))]
     fn occluded<'py>(
         &self,
@@ -316,8 +326,9 @@ impl PyScene {
         Ok(out)
     }
 
-    /// Every hit along each ray (up to ``max_hits``), nearest first: ``(ray, prim, t, u, v)``
-    /// arrays ordered by ray. After a hit the ray goes on from ``min_step`` (a distance) past it.
+    /// Every hit along each ray, at most ``max_hits`` per ray: ``(ray, prim, t, u, v)`` arrays,
+    /// ordered by ray, then by ``t``. After a hit at ``t`` the ray goes on from
+    /// ``t + min_step / |direction|`` (``min_step`` is a distance).
     #[pyo3(signature = (origins, directions, tnear = None, tfar = None, *, max_hits = 100, min_step = 0.0, threads = None))]
     #[allow(clippy::too_many_arguments, clippy::type_complexity)]
     fn intersect_all<'py>(
@@ -601,6 +612,41 @@ fn _ray_sets<'py>(
     Ok(d)
 }
 
+/// The rays of `Scene.intersect`'s arguments collected into one `Vec<Ray>` and traced by the
+/// library's `Scene::intersect_stream`, as a Rust caller would: `(t, prim, u, v)` with the
+/// committed scene's primitive ids. For the tests that compare the module with the Rust API
+/// (not part of the public API).
+#[pyfunction]
+#[pyo3(signature = (scene, origins, directions, tnear = 0.0, tfar = f64::INFINITY))]
+#[allow(clippy::type_complexity)]
+fn _intersect_stream<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyScene>,
+    origins: &Bound<'py, PyAny>,
+    directions: &Bound<'py, PyAny>,
+    tnear: f64,
+    tfar: f64,
+) -> PyResult<(
+    Bound<'py, PyArray1<f32>>,
+    Bound<'py, PyArray1<i64>>,
+    Bound<'py, PyArray1<f32>>,
+    Bound<'py, PyArray1<f32>>,
+)> {
+    let (tn, tf) = (tnear.into_pyobject(py)?.into_any(), tfar.into_pyobject(py)?.into_any());
+    let a = RayArgs::new(origins, directions, &tn, &tf)?;
+    let rays = a.rays()?;
+    let rays: Vec<raypack::Ray> = (0..rays.len).map(|i| rays.get(i)).collect();
+    let mut hits = vec![raypack::Hit::MISS; rays.len()];
+    scene.get().scene.intersect_stream(&rays, &mut hits);
+    let prim = hits.iter().map(|h| if h.is_hit() { h.prim as i64 } else { -1 }).collect();
+    Ok((
+        PyArray1::from_iter(py, hits.iter().map(|h| h.t)),
+        PyArray1::from_vec(py, prim),
+        PyArray1::from_iter(py, hits.iter().map(|h| h.u)),
+        PyArray1::from_iter(py, hits.iter().map(|h| h.v)),
+    ))
+}
+
 /// raypack: a SIMD ray tracer (BVH8, ray packets) for numpy rays.
 #[pymodule]
 fn _raypack(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -609,6 +655,7 @@ fn _raypack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(load, m)?)?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(_ray_sets, m)?)?;
+    m.add_function(wrap_pyfunction!(_intersect_stream, m)?)?;
     m.add("SceneWarning", m.py().get_type::<SceneWarning>())?;
     Ok(())
 }
