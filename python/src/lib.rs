@@ -87,7 +87,7 @@ fn parse_quality(q: &str) -> PyResult<BuildQuality> {
         "fast" => Ok(BuildQuality::Fast),
         "medium" => Ok(BuildQuality::Medium),
         "high" => Ok(BuildQuality::High),
-        _ => Err(PyValueError::new_err(format!("quality: expected 'fast', 'medium' or 'high', got {q:?}"))),
+        _ => Err(PyValueError::new_err(format!("quality: expected 'fast', 'medium' or 'high', got '{q}'"))),
     }
 }
 
@@ -101,7 +101,7 @@ fn parse_integrator(name: &str) -> PyResult<IntegratorKind> {
         "normals" => IntegratorKind::Normals,
         _ => {
             return Err(PyValueError::new_err(format!(
-                "integrator: expected 'global', 'direct', 'direct-only', 'indirect-only', 'bounce' or 'normals', got {name:?}"
+                "integrator: expected 'global', 'direct', 'direct-only', 'indirect-only', 'bounce' or 'normals', got '{name}'"
             )));
         }
     })
