@@ -40,7 +40,8 @@ impl Target<'_> {
         let s = self.scene;
         if (hit.prim as usize) < s.num_triangles() {
             let [a, b, c] = s.triangles.vertices(hit.prim as usize);
-            (b - a).cross(c - a).normalize_or(Vec3::Z)
+            // `+ 0.0` turns -0 into +0 (axis-aligned faces otherwise print as [-0, 0, 1]).
+            (b - a).cross(c - a).normalize_or(Vec3::Z) + Vec3::ZERO
         } else {
             s.surface(ray, hit).geometric_normal
         }

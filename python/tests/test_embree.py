@@ -85,7 +85,8 @@ def compare(name, vertices, faces, o, d, tfar, robust=False):
     both = (prim_r >= 0) & (prim_e >= 0)
     with np.errstate(invalid="ignore"):
         ulps = np.abs(t_r - t_e) / np.spacing(np.maximum(np.abs(t_r), np.abs(t_e)))
-    close = both & (np.abs(t_r - t_e) <= t_tolerance(vertices, faces, np.where(both, prim_r, 0), o, d, t_e))
+    with np.errstate(invalid="ignore"):  # inf - inf where both miss
+        close = both & (np.abs(t_r - t_e) <= t_tolerance(vertices, faces, np.where(both, prim_r, 0), o, d, t_e))
     agree = (prim_r == prim_e) & ((prim_r < 0) | close)
     agree |= close  # equal t on different triangles: t is not unique (a shared edge)
     bad = np.flatnonzero(~agree)
