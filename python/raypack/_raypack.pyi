@@ -3,7 +3,7 @@
 from collections.abc import Iterator
 import pathlib
 from os import PathLike
-from typing import Literal, Union
+from typing import Literal, Union, final
 
 import numpy as np
 import numpy.typing as npt
@@ -15,10 +15,13 @@ _Quality = Literal["fast", "medium", "high"]
 _Integrator = Literal["global", "direct", "direct-only", "indirect-only", "bounce", "normals"]
 _Path = Union[str, PathLike[str]]
 
+__all__ = ["Scene", "Hits", "load", "render", "_ray_sets", "_intersect_stream", "SceneWarning"]
+
 class SceneWarning(UserWarning):
     """A scene was loaded or committed with something left out (dropped faces, a BVH cache
     that could not be used, loader warnings)."""
 
+@final
 class Hits:
     """The closest hits of a ray query, one entry per ray.
 
@@ -44,6 +47,7 @@ class Hits:
     def __iter__(self) -> Iterator[npt.NDArray[np.generic]]: ...
     def __len__(self) -> int: ...
 
+@final
 class Scene:
     """A committed scene: triangles (and the spheres of scene files) under raypack's BVH8.
 
@@ -59,8 +63,8 @@ class Scene:
     for indices out of range.
     """
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         vertices: npt.ArrayLike,
         faces: npt.ArrayLike,
         *,
@@ -68,7 +72,7 @@ class Scene:
         watertight: bool = False,
         bvh_cache: _Path | None = None,
         threads: int | None = None,
-    ) -> None: ...
+    ) -> Scene: ...
     def intersect(
         self,
         origins: _Points,
@@ -180,3 +184,14 @@ def render(
     float32 ``(height, width, 3)``, top row first. The image depends on the seed only, not on
     the thread count. ``quality``, ``watertight`` and ``bvh_cache`` apply when ``scene`` is a
     path."""
+
+# Not public API: helpers of tools/bench-python.py and the tests.
+def _ray_sets(
+    scene: Scene, width: int, height: int, seed: int = 1
+) -> dict[str, tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], npt.NDArray[np.float32]]]:
+    """`raypack bench`'s ray sets: ``{"camera" | "diffuse" | "shadow": (origins, directions, tfar)}``."""
+
+def _intersect_stream(
+    scene: Scene, origins: _Points, directions: _Points, tnear: float = 0.0, tfar: float = ...
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.int64], npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+    """The rays traced by the Rust API's ``Scene::intersect_stream``: ``(t, prim, u, v)``."""

@@ -574,7 +574,7 @@ fn render<'py>(
         raypack::render::render(&s.scene, &camera, &settings, &|_| {}).film
     })?;
     let flat: Vec<f32> = film.pixels.iter().flat_map(|p| p.to_array()).collect();
-    Ok(PyArray1::from_vec(py, flat).reshape((height, width, 3))?)
+    PyArray1::from_vec(py, flat).reshape((height, width, 3))
 }
 
 /// The ray sets of `raypack bench` (`raypack::raysets`) at `width x height`: a dict
