@@ -11,7 +11,8 @@ use pyo3::types::{PyBool, PyFloat, PyInt};
 use raypack::{Ray, Vec3};
 
 /// A numpy array of real numbers as the caller gave it (float32 or float64, any strides), or
-/// converted once to float64 from another real dtype (integers, float16, other byte orders).
+/// converted once to float64 from another real dtype (integers, float16, other byte orders,
+/// unaligned memory).
 pub enum RealArray<'py> {
     F32(PyReadonlyArrayDyn<'py, f32>),
     F64(PyReadonlyArrayDyn<'py, f64>),
@@ -19,20 +20,11 @@ pub enum RealArray<'py> {
 
 /// `obj` as an array of real numbers; `name` names the argument in errors.
 pub fn real_array<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<RealArray<'py>> {
-    let py = obj.py();
-    let arr: Bound<'py, PyUntypedArray> = match obj.cast::<PyUntypedArray>() {
-        Ok(a) => a.clone(),
-        Err(_) => {
-            let np = py.import("numpy")?;
-            np.call_method1("asarray", (obj,))
-                .map_err(|e| PyTypeError::new_err(format!("{name}: expected an array of real numbers ({e})")))?
-                .cast_into::<PyUntypedArray>()
-                .map_err(|_| PyTypeError::new_err(format!("{name}: expected an array of real numbers")))?
-        }
-    };
+    let arr = numpy_asarray(obj, name, "of real numbers")?;
     let dtype = arr.dtype();
-    let (kind, size, native) = (dtype.kind(), dtype.itemsize(), dtype.is_native_byteorder() != Some(false));
-    match (kind, size, native) {
+    // Unaligned arrays (views into packed records) and other byte orders are converted.
+    let native = dtype.is_native_byteorder() != Some(false) && arr.is_aligned();
+    match (dtype.kind(), dtype.itemsize(), native) {
         (b'f', 4, true) => Ok(RealArray::F32(arr.cast::<PyArrayDyn<f32>>()?.readonly())),
         (b'f', 8, true) => Ok(RealArray::F64(arr.cast::<PyArrayDyn<f64>>()?.readonly())),
         (b'f' | b'i' | b'u', _, _) => {
@@ -330,8 +322,7 @@ pub fn vertices(obj: &Bound<'_, PyAny>) -> PyResult<Vec<Vec3>> {
 
 /// Faces `(M, 3)` of integers, each in `0 .. vertices`.
 pub fn faces(obj: &Bound<'_, PyAny>, vertices: usize) -> PyResult<Vec<[u32; 3]>> {
-    let py = obj.py();
-    let arr = numpy_asarray(obj, "faces")?;
+    let arr = numpy_asarray(obj, "faces", "of integers")?;
     let dtype = arr.dtype();
     if !matches!(dtype.kind(), b'i' | b'u') {
         return Err(PyTypeError::new_err(format!("faces: expected an array of integers, got dtype {}", dtype.str()?)));
@@ -362,18 +353,17 @@ pub fn faces(obj: &Bound<'_, PyAny>, vertices: usize) -> PyResult<Vec<[u32; 3]>>
         }
         out.push(tri);
     }
-    let _ = py;
     Ok(out)
 }
 
-/// `obj` as a numpy array (no copy when it is one).
-fn numpy_asarray<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<Bound<'py, PyUntypedArray>> {
+/// `obj` as a numpy array (no copy when it is one); `what` says what the array should hold.
+fn numpy_asarray<'py>(obj: &Bound<'py, PyAny>, name: &str, what: &str) -> PyResult<Bound<'py, PyUntypedArray>> {
     if let Ok(a) = obj.cast::<PyUntypedArray>() {
         return Ok(a.clone());
     }
     let np = obj.py().import("numpy")?;
     np.call_method1("asarray", (obj,))
-        .map_err(|e| PyTypeError::new_err(format!("{name}: expected an array ({e})")))?
+        .map_err(|e| PyTypeError::new_err(format!("{name}: expected an array {what} ({e})")))?
         .cast_into::<PyUntypedArray>()
-        .map_err(|_| PyTypeError::new_err(format!("{name}: expected an array")))
+        .map_err(|_| PyTypeError::new_err(format!("{name}: expected an array {what}")))
 }

@@ -81,6 +81,9 @@ def layouts(origins: np.ndarray, directions: np.ndarray):
     yield "strided views", big_o[::2, 1:4], big_d[::2, :3]
     yield "reversed twice", o32[::-1].copy()[::-1], d32[::-1].copy()[::-1]
     yield "big-endian", o32.astype(">f4"), d32.astype(">f8")
+    packed = np.zeros(len(o32), dtype=[("flag", "u1"), ("o", "<f4", 3), ("d", "<f8", 3)])  # unaligned fields
+    packed["o"], packed["d"] = o32, d32
+    yield "unaligned records", packed["o"], packed["d"]
     yield "lists", o32.tolist(), d32.tolist()
 
 
