@@ -15,7 +15,7 @@ _Quality = Literal["fast", "medium", "high"]
 _Integrator = Literal["global", "direct", "direct-only", "indirect-only", "bounce", "normals"]
 _Path = Union[str, PathLike[str]]
 
-__all__ = ["Scene", "Hits", "load", "render", "_ray_sets", "_intersect_stream", "SceneWarning"]
+__all__ = ["Scene", "Hits", "load", "render", "_ray_sets", "_intersect_stream", "_plane_points", "SceneWarning"]
 
 class SceneWarning(UserWarning):
     """A scene was loaded or committed with something left out (dropped faces, a BVH cache
@@ -195,3 +195,14 @@ def _intersect_stream(
     scene: Scene, origins: _Points, directions: _Points, tnear: float = 0.0, tfar: float = ...
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.int64], npt.NDArray[np.float32], npt.NDArray[np.float32]]:
     """The rays traced by the Rust API's ``Scene::intersect_stream``: ``(t, prim, u, v)``."""
+
+def _plane_points(
+    vertices: npt.NDArray[np.float64],
+    faces: npt.NDArray[np.int64],
+    tri: npt.NDArray[np.int64],
+    ray: npt.NDArray[np.int64],
+    t: npt.NDArray[np.float32],
+    origins: npt.NDArray[np.float64],
+    directions: npt.NDArray[np.float64],
+) -> npt.NDArray[np.float64]:
+    """float64 hit locations for ``raypack.trimesh``: where each ray meets its triangle's plane."""

@@ -31,6 +31,7 @@ from trimesh import caching
 from trimesh.ray.ray_util import contains_points as _contains_points
 
 from . import Scene
+from ._raypack import _plane_points
 
 __all__ = ["RayMeshIntersector"]
 
@@ -155,17 +156,16 @@ class RayMeshIntersector:
     def _locations(self, origins, directions, index_ray, index_tri, t):
         """Hit points in float64, as trimesh computes them: where each ray meets the plane of
         the (float64) triangle it hit; ``origin + t * direction`` (t in float32) where the ray
-        runs along that plane."""
-        o = origins[index_ray]
-        d = directions[index_ray].astype(np.float64)
-        vertices = np.asarray(self.mesh.vertices, dtype=np.float64)
-        faces = np.asarray(self.mesh.faces)[index_tri]
-        a = vertices[faces[:, 0]]
-        n = np.cross(vertices[faces[:, 1]] - a, vertices[faces[:, 2]] - a)
-        denom = np.einsum("ij,ij->i", d, n)
-        along = np.abs(denom) <= 1e-12 * np.linalg.norm(d, axis=1) * np.linalg.norm(n, axis=1)
-        s = np.where(along, t, np.einsum("ij,ij->i", a - o, n) / np.where(along, 1.0, denom))
-        return o + s[:, None] * d
+        runs along that plane (computed in Rust over all cores)."""
+        return _plane_points(
+            np.ascontiguousarray(self.mesh.vertices, dtype=np.float64),
+            np.ascontiguousarray(self.mesh.faces, dtype=np.int64),
+            index_tri,
+            index_ray,
+            np.ascontiguousarray(t, dtype=np.float32),
+            np.ascontiguousarray(origins, dtype=np.float64),
+            np.ascontiguousarray(directions, dtype=np.float64),
+        )
 
     def intersects_location(self, ray_origins, ray_directions, multiple_hits: bool = True):
         """Return the location of where a ray hits a surface.

@@ -647,6 +647,45 @@ fn _intersect_stream<'py>(
     ))
 }
 
+/// Hit locations in float64 for `raypack.trimesh` (see `trace::plane_points`): `vertices`
+/// `(N, 3)` float64 and `faces` `(M, 3)` int64 of the caller's mesh, per hit its triangle,
+/// ray and `t`, and the rays `(n, 3)` float64. Not part of the public API.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn _plane_points<'py>(
+    py: Python<'py>,
+    vertices: numpy::PyReadonlyArray2<'py, f64>,
+    faces: numpy::PyReadonlyArray2<'py, i64>,
+    tri: numpy::PyReadonlyArray1<'py, i64>,
+    ray: numpy::PyReadonlyArray1<'py, i64>,
+    t: numpy::PyReadonlyArray1<'py, f32>,
+    origins: numpy::PyReadonlyArray2<'py, f64>,
+    directions: numpy::PyReadonlyArray2<'py, f64>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let m = tri.len()?;
+    if ray.len()? != m || t.len()? != m {
+        return Err(PyValueError::new_err("tri, ray, t: expected the same length"));
+    }
+    // SAFETY: `np.empty`, every element written by `plane_points` before Python sees it.
+    let out = unsafe { PyArray2::<f64>::new(py, (m, 3), false) };
+    {
+        let mut w = out.readwrite();
+        let o = w.as_slice_mut()?;
+        let (v, f, tr, r, tt, or, di) = (
+            vertices.as_slice()?,
+            faces.as_slice()?,
+            tri.as_slice()?,
+            ray.as_slice()?,
+            t.as_slice()?,
+            origins.as_slice()?,
+            directions.as_slice()?,
+        );
+        run_detached(py, &PoolCache::default(), None, move || trace::plane_points(v, f, (tr, r, tt), (or, di), o))?
+            .map_err(PyValueError::new_err)?;
+    }
+    Ok(out)
+}
+
 /// raypack: a SIMD ray tracer (BVH8, ray packets) for numpy rays.
 #[pymodule]
 fn _raypack(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -656,6 +695,7 @@ fn _raypack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(_ray_sets, m)?)?;
     m.add_function(wrap_pyfunction!(_intersect_stream, m)?)?;
+    m.add_function(wrap_pyfunction!(_plane_points, m)?)?;
     m.add("SceneWarning", m.py().get_type::<SceneWarning>())?;
     Ok(())
 }

@@ -114,9 +114,10 @@ pub fn intersect_all(target: Target<'_>, rays: Rays<'_>, max_hits: usize, min_st
         .into_par_iter()
         .map(|k| {
             let (start, end) = (k * CHUNK, ((k + 1) * CHUNK).min(rays.len));
-            let mut hits: Vec<Vec<Hit>> = vec![Vec::new(); end - start];
+            // Every hit as (ray within the chunk, hit), pass by pass: nearest first per ray.
+            let mut hits: Vec<(u32, Hit)> = Vec::new();
             // The rays still going, as (index within the chunk, ray).
-            let mut live: Vec<(usize, Ray)> = (start..end).map(|i| (i - start, rays.get(i))).collect();
+            let mut live: Vec<(u32, Ray)> = (start..end).map(|i| ((i - start) as u32, rays.get(i))).collect();
             let mut batch: Vec<Ray> = Vec::with_capacity(live.len());
             let mut found: Vec<Hit> = Vec::with_capacity(live.len());
             for _ in 0..max_hits {
@@ -135,7 +136,7 @@ pub fn intersect_all(target: Target<'_>, rays: Rays<'_>, max_hits: usize, min_st
                         continue;
                     }
                     let (j, mut ray) = live[idx];
-                    hits[j].push(hit);
+                    hits.push((j, hit));
                     let step = min_step / ray.dir.length();
                     // At least the next float above t: the interval is (tnear, tfar].
                     ray.tnear = (hit.t + step).max(hit.t);
@@ -146,24 +147,26 @@ pub fn intersect_all(target: Target<'_>, rays: Rays<'_>, max_hits: usize, min_st
                 }
                 live.truncate(next);
             }
+            // Ray-major; the stable sort keeps each ray's hits nearest first.
+            hits.sort_by_key(|&(j, _)| j);
             let mut out = AllHits::default();
-            for (j, hs) in hits.into_iter().enumerate() {
-                for h in hs {
-                    out.ray.push((start + j) as i64);
-                    out.prim.push(target.caller_prim(h.prim));
-                    out.t.push(h.t);
-                    out.u.push(h.u);
-                    out.v.push(h.v);
-                }
+            for (j, h) in hits {
+                out.ray.push((start + j as usize) as i64);
+                out.prim.push(target.caller_prim(h.prim));
+                out.t.push(h.t);
+                out.u.push(h.u);
+                out.v.push(h.v);
             }
             out
         })
         .collect();
     let mut all = AllHits::default();
     let total: usize = parts.iter().map(|p| p.ray.len()).sum();
-    for v in [&mut all.ray, &mut all.prim] {
-        v.reserve_exact(total);
-    }
+    all.ray.reserve_exact(total);
+    all.prim.reserve_exact(total);
+    all.t.reserve_exact(total);
+    all.u.reserve_exact(total);
+    all.v.reserve_exact(total);
     for p in parts {
         all.ray.extend(p.ray);
         all.prim.extend(p.prim);
@@ -172,4 +175,41 @@ pub fn intersect_all(target: Target<'_>, rays: Rays<'_>, max_hits: usize, min_st
         all.v.extend(p.v);
     }
     all
+}
+
+/// Where each hit ray meets the plane of its triangle, in float64 (as trimesh computes hit
+/// locations): `origin + s * direction` with `s` from the plane equation of the float64
+/// triangle, or `origin + t * direction` where the ray runs along the plane.
+pub fn plane_points(
+    vertices: &[f64],
+    faces: &[i64],
+    hits: (&[i64], &[i64], &[f32]),
+    rays: (&[f64], &[f64]),
+    out: &mut [f64],
+) -> Result<(), String> {
+    let (tri, ray, t) = hits;
+    let (origins, directions) = rays;
+    let row = |a: &[f64], i: usize| -> Option<[f64; 3]> { a.get(3 * i..3 * i + 3).map(|r| [r[0], r[1], r[2]]) };
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let cross =
+        |a: [f64; 3], b: [f64; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+    out.par_chunks_mut(3).enumerate().try_for_each(|(k, p)| {
+        let bad = || format!("hit {k}: triangle {} or ray {} out of range", tri[k], ray[k]);
+        let f = row_i64(faces, tri[k] as usize).ok_or_else(bad)?;
+        let [a, b, c] = f.map(|i| row(vertices, i as usize));
+        let (Some(a), Some(b), Some(c)) = (a, b, c) else { return Err(bad()) };
+        let (o, d) =
+            (row(origins, ray[k] as usize).ok_or_else(bad)?, row(directions, ray[k] as usize).ok_or_else(bad)?);
+        let n = cross(sub(b, a), sub(c, a));
+        let denom = dot(n, d);
+        let along = denom.abs() <= 1e-12 * dot(d, d).sqrt() * dot(n, n).sqrt();
+        let s = if along { t[k] as f64 } else { dot(n, sub(a, o)) / denom };
+        p.copy_from_slice(&[o[0] + s * d[0], o[1] + s * d[1], o[2] + s * d[2]]);
+        Ok(())
+    })
+}
+
+fn row_i64(a: &[i64], i: usize) -> Option<[i64; 3]> {
+    a.get(3 * i..3 * i + 3).map(|r| [r[0], r[1], r[2]])
 }
