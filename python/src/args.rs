@@ -280,17 +280,18 @@ pub struct RayArgs<'py> {
 }
 
 impl<'py> RayArgs<'py> {
+    /// The arguments of a query; `tnear` defaults to 0, `tfar` to infinity.
     pub fn new(
         origins: &Bound<'py, PyAny>,
         directions: &Bound<'py, PyAny>,
-        tnear: &Bound<'py, PyAny>,
-        tfar: &Bound<'py, PyAny>,
+        tnear: Option<&Bound<'py, PyAny>>,
+        tfar: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Self> {
         Ok(Self {
             origins: real_array(origins, "origins")?,
             directions: real_array(directions, "directions")?,
-            tnear: column_arg(tnear, "tnear")?,
-            tfar: column_arg(tfar, "tfar")?,
+            tnear: tnear.map_or(Ok(ColumnArg::Number(0.0)), |t| column_arg(t, "tnear"))?,
+            tfar: tfar.map_or(Ok(ColumnArg::Number(f32::INFINITY)), |t| column_arg(t, "tfar"))?,
         })
     }
 

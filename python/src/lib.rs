@@ -266,8 +266,7 @@ impl PyScene {
         tfar: Option<&Bound<'py, PyAny>>,
         threads: Option<usize>,
     ) -> PyResult<Hits> {
-        let (zero, inf) = (0.0f64.into_pyobject(py)?.into_any(), f64::INFINITY.into_pyobject(py)?.into_any());
-        let a = RayArgs::new(origins, directions, tnear.unwrap_or(&zero), tfar.unwrap_or(&inf))?;
+        let a = RayArgs::new(origins, directions, tnear, tfar)?;
         let rays = a.rays()?;
         let k = rays.len;
         // SAFETY (all five): uninitialised numpy arrays (`np.empty`; zeroing them cost 4 ns per
@@ -312,8 +311,7 @@ impl PyScene {
         tfar: Option<&Bound<'py, PyAny>>,
         threads: Option<usize>,
     ) -> PyResult<Bound<'py, PyArray1<bool>>> {
-        let (zero, inf) = (0.0f64.into_pyobject(py)?.into_any(), f64::INFINITY.into_pyobject(py)?.into_any());
-        let a = RayArgs::new(origins, directions, tnear.unwrap_or(&zero), tfar.unwrap_or(&inf))?;
+        let a = RayArgs::new(origins, directions, tnear, tfar)?;
         let rays = a.rays()?;
         // SAFETY: `np.empty`, every element written by `trace::occluded` (as in `intersect`).
         let out = unsafe { PyArray1::<bool>::new(py, rays.len, false) };
@@ -351,8 +349,7 @@ impl PyScene {
         if !(min_step >= 0.0 && min_step.is_finite()) {
             return Err(PyValueError::new_err(format!("min_step: expected a finite distance >= 0, got {min_step}")));
         }
-        let (zero, inf) = (0.0f64.into_pyobject(py)?.into_any(), f64::INFINITY.into_pyobject(py)?.into_any());
-        let a = RayArgs::new(origins, directions, tnear.unwrap_or(&zero), tfar.unwrap_or(&inf))?;
+        let a = RayArgs::new(origins, directions, tnear, tfar)?;
         let rays = a.rays()?;
         let target = self.target();
         let all = run_detached(py, &self.pools, threads, move || {
@@ -633,7 +630,7 @@ fn _intersect_stream<'py>(
     Bound<'py, PyArray1<f32>>,
 )> {
     let (tn, tf) = (tnear.into_pyobject(py)?.into_any(), tfar.into_pyobject(py)?.into_any());
-    let a = RayArgs::new(origins, directions, &tn, &tf)?;
+    let a = RayArgs::new(origins, directions, Some(&tn), Some(&tf))?;
     let rays = a.rays()?;
     let rays: Vec<raypack::Ray> = (0..rays.len).map(|i| rays.get(i)).collect();
     let mut hits = vec![raypack::Hit::MISS; rays.len()];
