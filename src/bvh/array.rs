@@ -49,7 +49,16 @@ impl<T: bytemuck::Pod> BvhArray<T> {
     pub(crate) fn zeroed(len: usize) -> Self {
         let bytes = len.checked_mul(std::mem::size_of::<T>()).expect("array size overflows");
         match memmap2::MmapMut::map_anon(bytes) {
-            Ok(map) if bytes > 0 => Self { repr: Repr::Anon { map, len } },
+            Ok(map) if bytes > 0 => {
+                // Transparent huge pages where the system allows them (a hint; errors are
+                // ignored): incoherent rays touch the BVH all over, and with 4 KiB pages a
+                // 60 MB tree misses the TLB on most node visits. Embree advises the same on its
+                // BVH memory. Stanford dragon (871k triangles, 58 MB of BVH), Ice Lake-SP,
+                // AVX2, 1 thread, 5 interleaved runs, median Mrays/s: diffuse rays
+                // single-ray 1.92 -> 2.15, shadow rays 2.64 -> 2.76.
+                let _ = map.advise(memmap2::Advice::HugePage);
+                Self { repr: Repr::Anon { map, len } }
+            }
             _ => bytemuck::zeroed_vec(len).into(),
         }
     }

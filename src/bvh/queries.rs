@@ -131,7 +131,7 @@ impl<T: TriBlock, C: Counter> IsaOp for IntersectStream<'_, T, C> {
     type Output = ();
     #[inline(always)]
     fn run<I: IsaLanes>(self) {
-        type V<I> = <I as IsaLanes>::F16;
+        type V<I> = <I as IsaLanes>::Stream;
         let k = V::<I>::LANES;
         let (bvh, rays) = (self.bvh.slices(), self.rays);
         with_kernel!(bvh.test, P => {
@@ -161,7 +161,7 @@ impl<T: TriBlock, C: Counter> IsaOp for OccludedStream<'_, T, C> {
     type Output = ();
     #[inline(always)]
     fn run<I: IsaLanes>(self) {
-        type V<I> = <I as IsaLanes>::F16;
+        type V<I> = <I as IsaLanes>::Stream;
         let k = V::<I>::LANES;
         let (bvh, rays) = (self.bvh.slices(), self.rays);
         let mut cache = OccluderCache::default();

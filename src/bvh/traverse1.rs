@@ -143,13 +143,14 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                     if mask == 0 {
                         break 'descend;
                     }
-                    let d = dist.to_array();
                     let i0 = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
                     if mask == 0 {
                         cur = node.children[i0];
                         continue;
                     }
+                    let mut d = [0.0f32; 8];
+                    dist.store(&mut d);
                     // Two or more children will be visited: start fetching all of them now.
                     let mut m = mask;
                     while m != 0 {

@@ -58,16 +58,17 @@ pub fn moller_trumbore<V: Lanes>(
     let one = V::splat(1.0);
     let p = dir.cross(*e2);
     let det = e1.dot(p);
-    let det_ok = !det.eq(zero) & det.is_finite();
+    let sign = det & V::splat(-0.0); // the sign bit of det
+    let a = det ^ sign; // |det|
+    let det_ok = a.gt(zero) & a.lt(V::splat(f32::INFINITY)); // non-zero and finite (NaN fails)
     let s = *origin - *v0;
     let uu = s.dot(p);
     let q = s.cross(*e1);
     let vv = dir.dot(q);
     let tt = e2.dot(q);
-    // Division-free necessary conditions (see above).
-    let sign = one.copysign(det);
-    let a = det & !V::splat(-0.0);
-    let (u1, v1, t1) = (uu * sign, vv * sign, tt * sign);
+    // Division-free necessary conditions (see above), on U, V, T times the sign of det (a
+    // flip of the sign bit: exact).
+    let (u1, v1, t1) = (uu ^ sign, vv ^ sign, tt ^ sign);
     let lo = -(a * V::splat(SLACK));
     let hi = a * V::splat(1.0 + SLACK);
     let maybe = u1.ge(lo)
