@@ -27,7 +27,7 @@ use raypack::embree::{EmbreeOptions, EmbreeQuality, EmbreeScene};
 use raypack::generate::{Mesh, grid, random_soup, uv_sphere};
 use raypack::raysets::{self, RaySet, RaySetKind};
 use raypack::render::sampler::Rng;
-use raypack::{BuildOptions, Hit, Material, Ray, Scene, SceneBuilder, Vec3};
+use raypack::{BuildOptions, Hit, Isa, Material, Ray, Scene, SceneBuilder, Vec3};
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
@@ -452,20 +452,59 @@ fn compare_set(scene: &Scene, set: &RaySet, methods: &[Method<'_>]) -> BTreeMap<
 /// All of Embree's calls are checked on its MEDIUM-quality BVH; the single-ray and 16-wide
 /// calls also on its HIGH-quality (spatial split) BVH.
 fn crosscheck(name: &str, scene: &Scene, sets: &[RaySet], robust: bool) -> (Vec<String>, usize) {
+    crosscheck_isas(name, scene, sets, robust, false)
+}
+
+/// [`crosscheck`], and with `every_isa` also raypack's kernels on every other ISA tier this
+/// process may run and Embree's MEDIUM single-ray and 16-wide calls at every lower tier
+/// (`max_isa`: its kernels round differently per ISA, which the tolerance allows for).
+/// The generated scenes take this; the third-party ones stay at the process's tier, which
+/// `RAYPACK_ISA` sets, to keep the suite's time.
+fn crosscheck_isas(name: &str, scene: &Scene, sets: &[RaySet], robust: bool, every_isa: bool) -> (Vec<String>, usize) {
     let t0 = std::time::Instant::now();
-    let build = |quality| {
-        EmbreeScene::with_options(scene, EmbreeOptions { quality, robust, ..EmbreeOptions::default() })
+    let build = |quality, max_isa| {
+        EmbreeScene::with_options(scene, EmbreeOptions { quality, robust, max_isa, ..EmbreeOptions::default() })
             .expect("Embree accepts the scene")
     };
-    let (medium, high) = (build(EmbreeQuality::Medium), build(EmbreeQuality::High));
+    let (medium, high) = (build(EmbreeQuality::Medium, None), build(EmbreeQuality::High, None));
+    let lower: Vec<(Isa, EmbreeScene)> = if every_isa {
+        Isa::available().filter(|&i| i < Isa::detected()).map(|i| (i, build(EmbreeQuality::Medium, Some(i)))).collect()
+    } else {
+        Vec::new()
+    };
     let flags = if robust { ", robust" } else { "" };
+    let others: Vec<(Isa, Scene)> = Isa::available()
+        .filter(|&i| every_isa && i != scene.isa())
+        .map(|i| {
+            let mut s = scene.clone();
+            s.set_isa(i).expect("available tiers are supported");
+            (i, s)
+        })
+        .collect();
+    // The reference first, then every kernel on the scene's ISA, then on every other tier.
     let mut methods = raypack_methods(scene);
+    for m in &mut methods {
+        m.name = format!("{} [{}]", m.name, scene.isa());
+    }
+    for (isa, s) in &others {
+        methods.extend(raypack_methods(s).into_iter().filter(|m| !m.name.contains("reference")).map(|mut m| {
+            m.name = format!("{} [{isa}]", m.name);
+            m
+        }));
+    }
     methods.extend(embree_methods(&medium, &format!(" (medium{flags})")));
     methods.extend(
         embree_methods(&high, &format!(" (high{flags})"))
             .into_iter()
             .filter(|m| !m.name.contains('8') && !m.name.contains("coherent")),
     );
+    for (isa, e) in &lower {
+        methods.extend(
+            embree_methods(e, &format!(" (medium{flags}, max_isa {isa})"))
+                .into_iter()
+                .filter(|m| !m.name.contains('8') && !m.name.contains("coherent")),
+        );
+    }
 
     let mut failures = Vec::new();
     let mut total = 0;
@@ -541,7 +580,7 @@ fn generated_scenes_agree_with_embree() {
     let mut total = 0;
     for (name, scene, robust) in generated_scenes() {
         let sets = ray_sets(&scene, (800, 600), 460_000, 150_000);
-        let (f, n) = crosscheck(&name, &scene, &sets, robust);
+        let (f, n) = crosscheck_isas(&name, &scene, &sets, robust, true);
         failures.extend(f);
         total += n;
     }
