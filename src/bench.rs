@@ -4,7 +4,8 @@
 //! Every method has the same contract: a slice of [`Ray`]s in, a slice of [`Hit`]s (or
 //! occlusion flags) out. Rays are spread over threads in contiguous chunks of whole 4×4
 //! tiles ([`CHUNK`] rays). Each method runs once to warm up and to validate its checksum
-//! against the reference, then `runs` times; the median time is reported.
+//! against the reference, then `runs` times, round-robin with the other methods of the same
+//! ray set and thread count; the median time is reported.
 //!
 //! The raypack side is the kernel registry [`crate::kernels::KERNELS`], run on the scene's ISA
 //! tier (`--isa` lowers it, and limits Embree to the same tier).
@@ -352,24 +353,37 @@ pub fn run_bench(
             let wanted = |m: &&Method<'_>| {
                 settings.methods.is_empty() || settings.methods.iter().any(|f| m.name.contains(f.as_str()))
             };
-            for m in methods.iter().filter(|m| m.run.is_occlusion() == occlusion).filter(wanted) {
-                let mut out = output_for(&m.run, set.rays.len());
-                let (reps, times) = pool.install(|| {
-                    let t0 = Instant::now();
-                    trace(&m.run, &set.rays, &mut out); // warm-up
-                    let reps = repetitions(t0.elapsed());
-                    let times = (0..settings.runs)
-                        .map(|_| {
-                            let t0 = Instant::now();
-                            for _ in 0..reps {
-                                trace(&m.run, &set.rays, &mut out);
-                            }
-                            t0.elapsed()
-                        })
-                        .collect::<Vec<_>>();
-                    (reps, times)
-                });
-                let checksum = out.checksum(&set.rays);
+            // Every method warms up once (and sizes its repetitions), then the timed runs go
+            // round-robin over the methods, so a phase of the machine's load falls on all of
+            // them alike rather than on whichever ran during it.
+            let chosen: Vec<&Method<'_>> =
+                methods.iter().filter(|m| m.run.is_occlusion() == occlusion).filter(wanted).collect();
+            // One output buffer for all methods; each checksum is taken from the warm-up.
+            let mut out = output_for(&reference.run, set.rays.len());
+            let mut times: Vec<Vec<Duration>> = vec![Vec::with_capacity(settings.runs); chosen.len()];
+            let (reps, checksums): (Vec<usize>, Vec<Checksum>) = pool.install(|| {
+                chosen
+                    .iter()
+                    .map(|m| {
+                        let t0 = Instant::now();
+                        trace(&m.run, &set.rays, &mut out); // warm-up
+                        let reps = repetitions(t0.elapsed());
+                        (reps, out.checksum(&set.rays))
+                    })
+                    .unzip()
+            });
+            pool.install(|| {
+                for _ in 0..settings.runs {
+                    for ((m, &reps), times) in chosen.iter().zip(&reps).zip(&mut times) {
+                        let t0 = Instant::now();
+                        for _ in 0..reps {
+                            trace(&m.run, &set.rays, &mut out);
+                        }
+                        times.push(t0.elapsed());
+                    }
+                }
+            });
+            for ((m, checksum), (reps, times)) in chosen.iter().zip(checksums).zip(reps.into_iter().zip(times)) {
                 let allowed = (set.rays.len() as f64 * 1e-5).max(0.0);
                 let checksum_differs = (checksum.hits as f64 - ref_sum.hits as f64).abs() > allowed;
                 let med = median(times).as_secs_f64().max(1e-12);
