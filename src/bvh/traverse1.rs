@@ -11,14 +11,14 @@
 //! sorts the pushed entries by distance (popped entries farther than the closest hit so far
 //! are skipped).
 //!
-//! Measured against visiting hit children in slot order (no sorting; 1 thread, best of 9,
-//! Mrays/s, Embree's `rtcIntersect1` in the same process for scale): on the Stanford dragon
-//! camera rays 10.1 unsorted against 18.4 sorted (Embree 14.4), diffuse bounces 2.17 against
-//! 2.58 (Embree 2.90 / 2.51 in the two runs); on the CS184 beetle, which fits in cache,
-//! 23.6 against 24.3. The static per-octant child order of Fuetterling et al. (no sorting at
-//! run time, an order table per node) was not tried: the 256-byte node has no room for the
-//! tables without narrowing the child references.
-//!
+// Measured against visiting hit children in slot order (no sorting; 1 thread, best of 9,
+// Mrays/s, Embree's `rtcIntersect1` in the same process for scale): on the Stanford dragon
+// camera rays 10.1 unsorted against 18.4 sorted (Embree 14.4), diffuse bounces 2.17 against
+// 2.58 (Embree 2.90 / 2.51 in the two runs); on the CS184 beetle, which fits in cache,
+// 23.6 against 24.3. The static per-octant child order of Fuetterling et al. (no sorting at
+// run time, an order table per node) was not tried: the 256-byte node has no room for the
+// tables without narrowing the child references.
+//
 //! Leaves are runs of SoA blocks tested one ray against all M triangles at once
 //! ([`crate::geometry::tri_block`]) with the BVH's [`TriangleKernel`] `P` (Möller–Trumbore
 //! or watertight), chosen once per query.
@@ -77,16 +77,21 @@ impl<V: Lanes> Ray1<V> {
     /// product), so the same guarantee, and one dependent multiplication fewer per node. With
     /// the four-operand minimum and maximum as two levels each, the test's critical path is
     /// 16 cycles of latency on AVX2 instead of 24 (Ice Lake: 4 per add, mul, min, max).
-    /// Callgrind cannot see latency; wall clock, CS184 beetle diffuse rays, single-ray kernel
-    /// on AVX2, 1 thread: see the commit that made it.
-    ///
-    /// Tried and not kept: the fused form `t = plane * inv - org * inv` (one FMA per plane
-    /// instead of a subtraction and a multiplication, as Embree's non-robust kernel does).
-    /// On the Stanford dragon (1 thread, 9 interleaved runs, median Mrays/s) it gained 2-4%
-    /// (camera rays in 16-ray packets 32.0 against 31.5, diffuse 2.79 against 2.69, shadow 7.98
-    /// against 7.63), but the rounding of `org * inv` grows with the distance of the origin
-    /// from the scene and would eat the 2^-20 relative padding of the node boxes for origins
-    /// more than about 16 scene extents away, making hits near node faces go missing.
+    // Callgrind cannot see latency; wall clock, CS184 beetle diffuse rays, single-ray kernel
+    // on AVX2, 1 thread: see the commit that made it.
+    //
+    // Tried and not kept: the fused form `t = plane * inv - org * inv` (one FMA per plane
+    // instead of a subtraction and a multiplication, as Embree's non-robust kernel does).
+    // On the Stanford dragon (1 thread, 9 interleaved runs, median Mrays/s) it gained 2-4%
+    // (camera rays in 16-ray packets 32.0 against 31.5, diffuse 2.79 against 2.69, shadow 7.98
+    // against 7.63), but the rounding of `org * inv` grows with the distance of the origin
+    // from the scene and would eat the 2^-20 relative padding of the node boxes for origins
+    // more than about 16 scene extents away, making hits near node faces go missing.
+    // Untried: the per-ray constant `org * inv` is exact in f64; rounded from there toward the
+    // side that widens the slab (up for near planes, down for far ones) it would leave only
+    // roundings relative to `t`, which SLAB_WIDEN covers, and make the fused form as robust.
+    // It needs a finite reciprocal (Embree's `rcp_safe`) so that `plane * inv - org * inv`
+    // has no inf - inf.
     #[inline(always)]
     pub fn intersect_node(&self, n: &Bvh8Node, tfar: f32) -> (u32, V) {
         let b = &n.bounds;

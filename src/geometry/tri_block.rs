@@ -188,18 +188,17 @@ pub enum TriangleTest {
     MollerTrumbore,
     /// Woop, Benthin and Wald's watertight test ([`crate::geometry::watertight`]): blocks
     /// store the exact vertices `v0`, `v1`, `v2`. No ray slips through a shared edge or vertex.
-    ///
-    /// Cost, measured with `examples/triangle_test_cost.rs` under callgrind (Stanford dragon,
-    /// 871k triangles, `raypack bench`'s primary, diffuse and shadow rays at 512 x 384, 265k
-    /// rays, one thread, AVX2 build): single-ray kernels 196.0M against 174.2M instructions
-    /// (+12.5%), 16-ray packet streams 267.1M against 255.3M (+4.6%). Memory: none (the same
-    /// 40 bytes per triangle). The per-ray shear is computed once per ray (packets: per lane,
-    /// with lane selects for the axis permutation). Wall clock on the native AVX-512 build
-    /// (`raypack bench` on the dragon, 1 thread, two interleaved runs of each): camera rays in
-    /// 16-ray packets 27% slower (37.8 / 37.1 against 25.7 / 28.8 Mrays/s), single camera rays
-    /// 8%, shadow streams even: the per-lane permutation of each broadcast triangle costs more
-    /// there than the instruction count shows. Untried: permuting by scalar index when all
-    /// lanes share `kz` and the swap, as coherent packets do.
+    // Cost, measured with `examples/triangle_test_cost.rs` under callgrind (Stanford dragon,
+    // 871k triangles, `raypack bench`'s primary, diffuse and shadow rays at 512 x 384, 265k
+    // rays, one thread, AVX2 build): single-ray kernels 196.0M against 174.2M instructions
+    // (+12.5%), 16-ray packet streams 267.1M against 255.3M (+4.6%). Memory: none (the same
+    // 40 bytes per triangle). The per-ray shear is computed once per ray (packets: per lane,
+    // with lane selects for the axis permutation). Wall clock on the native AVX-512 build
+    // (`raypack bench` on the dragon, 1 thread, two interleaved runs of each): camera rays in
+    // 16-ray packets 27% slower (37.8 / 37.1 against 25.7 / 28.8 Mrays/s), single camera rays
+    // 8%, shadow streams even: the per-lane permutation of each broadcast triangle costs more
+    // there than the instruction count shows. Untried: permuting by scalar index when all
+    // lanes share `kz` and the swap, as coherent packets do.
     Watertight,
 }
 
