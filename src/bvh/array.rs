@@ -14,7 +14,7 @@ use std::sync::Arc;
 // on this machine (page faults of the new memory, mostly), against nothing for pages the
 // file's mapping already shares with the page cache.
 ///
-/// The builder's large arrays are anonymous mappings ([`BvhArray::zeroed`]): zero pages that
+/// The builder's large arrays are anonymous mappings (`BvhArray::zeroed`): zero pages that
 /// the kernel provides on first touch, so the parallel tasks that fill them pay the page
 /// faults in parallel, and nothing writes them twice (a `Vec` of 64-byte-aligned blocks is
 /// zeroed by one thread with `memset`).

@@ -1,4 +1,4 @@
-//! The entry points of the BVH8 kernels: each query is an [`IsaOp`] that [`dispatch`]
+//! The entry points of the BVH8 kernels: each query is an `IsaOp` that `dispatch`
 //! instantiates per ISA tier, and that picks the triangle kernel `P` of the BVH's layout
 //! ([`TriangleTest`]) once per call.
 //!
