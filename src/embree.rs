@@ -1,5 +1,7 @@
-//! Intel Embree 3 behind a safe wrapper, for cross-checking raypack's hits and for
-//! side-by-side benchmarks (cargo feature `embree`, which links the system `libembree3`).
+//! Intel Embree 3 or 4 behind a safe wrapper, for cross-checking raypack's hits and for
+//! side-by-side benchmarks (cargo feature `embree`; `build.rs` says where it looks for
+//! Embree: `RAYPACK_EMBREE_DIR`, pkg-config, the system headers). [`EMBREE_FOUND`] names the
+//! one this build links; [`EmbreeScene::version`] the library loaded at run time.
 //!
 //! The C side is `tests/embree/shim.c`: one Embree device and scene per [`EmbreeScene`],
 //! holding one triangle mesh whose primitive ids are raypack's triangle ids. Rays and hits
@@ -10,6 +12,10 @@
 
 use crate::math::Vec3;
 use crate::ray::{Hit, Ray};
+
+/// The Embree this build was compiled against and how `build.rs` found it, e.g.
+/// `Embree 3 (/usr/include/embree3)` or `Embree 4 (pkg-config embree4 4.4.0)`.
+pub const EMBREE_FOUND: &str = env!("RAYPACK_EMBREE_FOUND");
 use crate::scene::Scene;
 use crate::simd::Isa;
 use std::ffi::{CStr, c_char, c_int};

@@ -1,7 +1,14 @@
-/* Embree 3 shim for raypack: see shim.h. Compiled by build.rs with cargo feature `embree`. */
+/* Embree 3 or 4 shim for raypack: see shim.h. Compiled by build.rs with cargo feature
+ * `embree`, which defines RAYPACK_EMBREE_MAJOR (3 or 4) for the Embree it found. */
 #include "shim.h"
 
+#if RAYPACK_EMBREE_MAJOR == 4
+#include <embree4/rtcore.h>
+#elif RAYPACK_EMBREE_MAJOR == 3
 #include <embree3/rtcore.h>
+#else
+#error "RAYPACK_EMBREE_MAJOR must be 3 or 4 (build.rs sets it)"
+#endif
 #include <math.h>
 #include <stdatomic.h>
 #include <stdio.h>
@@ -129,10 +136,38 @@ void rp_embree_release(RpEmbree* e) {
   free(e);
 }
 
-static inline void rp_context(struct RTCIntersectContext* ctx, int coherent) {
-  rtcInitIntersectContext(ctx);
-  ctx->flags = coherent ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+/* A query's options: Embree 3's intersect context, or Embree 4's intersect and occluded
+ * arguments (the same coherence hint, in the versions' own words). The RP_* macros call the
+ * versions' functions, whose argument orders differ. */
+#if RAYPACK_EMBREE_MAJOR == 4
+typedef struct {
+  struct RTCIntersectArguments intersect;
+  struct RTCOccludedArguments occluded;
+} RpQuery;
+
+static inline void rp_query(RpQuery* q, int coherent) {
+  rtcInitIntersectArguments(&q->intersect);
+  rtcInitOccludedArguments(&q->occluded);
+  q->intersect.flags = q->occluded.flags = coherent ? RTC_RAY_QUERY_FLAG_COHERENT : RTC_RAY_QUERY_FLAG_INCOHERENT;
 }
+#define RP_INTERSECT1(scene, q, rayhit) rtcIntersect1(scene, rayhit, &(q)->intersect)
+#define RP_OCCLUDED1(scene, q, ray) rtcOccluded1(scene, ray, &(q)->occluded)
+#define RP_INTERSECTK(K, valid, scene, q, rayhit) rtcIntersect##K(valid, scene, rayhit, &(q)->intersect)
+#define RP_OCCLUDEDK(K, valid, scene, q, ray) rtcOccluded##K(valid, scene, ray, &(q)->occluded)
+#else
+typedef struct {
+  struct RTCIntersectContext context;
+} RpQuery;
+
+static inline void rp_query(RpQuery* q, int coherent) {
+  rtcInitIntersectContext(&q->context);
+  q->context.flags = coherent ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+}
+#define RP_INTERSECT1(scene, q, rayhit) rtcIntersect1(scene, &(q)->context, rayhit)
+#define RP_OCCLUDED1(scene, q, ray) rtcOccluded1(scene, &(q)->context, ray)
+#define RP_INTERSECTK(K, valid, scene, q, rayhit) rtcIntersect##K(valid, scene, &(q)->context, rayhit)
+#define RP_OCCLUDEDK(K, valid, scene, q, ray) rtcOccluded##K(valid, scene, &(q)->context, ray)
+#endif
 
 static inline void rp_load_ray1(struct RTCRay* r, const RpRay* s) {
   r->org_x = s->org[0];
@@ -150,14 +185,14 @@ static inline void rp_load_ray1(struct RTCRay* r, const RpRay* s) {
 }
 
 void rp_embree_intersect1(const RpEmbree* e, const RpRay* rays, RpHit* hits, size_t n, int coherent) {
-  struct RTCIntersectContext ctx;
-  rp_context(&ctx, coherent);
+  RpQuery q;
+  rp_query(&q, coherent);
   for (size_t i = 0; i < n; i++) {
     struct RTCRayHit rh;
     rp_load_ray1(&rh.ray, &rays[i]);
     rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
     rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(e->scene, &ctx, &rh);
+    RP_INTERSECT1(e->scene, &q, &rh);
     if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
       hits[i] = (RpHit){rh.ray.tfar, rh.hit.u, rh.hit.v, rh.hit.primID};
     } else {
@@ -167,12 +202,12 @@ void rp_embree_intersect1(const RpEmbree* e, const RpRay* rays, RpHit* hits, siz
 }
 
 void rp_embree_occluded1(const RpEmbree* e, const RpRay* rays, uint8_t* out, size_t n, int coherent) {
-  struct RTCIntersectContext ctx;
-  rp_context(&ctx, coherent);
+  RpQuery q;
+  rp_query(&q, coherent);
   for (size_t i = 0; i < n; i++) {
     struct RTCRay r;
     rp_load_ray1(&r, &rays[i]);
-    rtcOccluded1(e->scene, &ctx, &r);
+    RP_OCCLUDED1(e->scene, &q, &r);
     out[i] = r.tfar == -INFINITY;
   }
 }
@@ -203,8 +238,8 @@ void rp_embree_occluded1(const RpEmbree* e, const RpRay* rays, uint8_t* out, siz
                                                                                                     \
   void rp_embree_intersect##K(const RpEmbree* e, const RpRay* rays, RpHit* hits, size_t n,         \
                               int coherent) {                                                       \
-    struct RTCIntersectContext ctx;                                                                 \
-    rp_context(&ctx, coherent);                                                                     \
+    RpQuery q;                                                                                      \
+    rp_query(&q, coherent);                                                                         \
     for (size_t i = 0; i < n; i += K) {                                                             \
       struct RTCRayHit##K rh;                                                                       \
       int valid[K];                                                                                 \
@@ -213,7 +248,7 @@ void rp_embree_occluded1(const RpEmbree* e, const RpRay* rays, uint8_t* out, siz
         rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;                                                 \
         rh.hit.instID[0][l] = RTC_INVALID_GEOMETRY_ID;                                              \
       }                                                                                             \
-      rtcIntersect##K(valid, e->scene, &ctx, &rh);                                                  \
+      RP_INTERSECTK(K, valid, e->scene, &q, &rh);                                                   \
       for (int l = 0; l < count; l++) {                                                             \
         if (rh.hit.geomID[l] != RTC_INVALID_GEOMETRY_ID) {                                          \
           hits[i + l] = (RpHit){rh.ray.tfar[l], rh.hit.u[l], rh.hit.v[l], rh.hit.primID[l]};        \
@@ -226,13 +261,13 @@ void rp_embree_occluded1(const RpEmbree* e, const RpRay* rays, uint8_t* out, siz
                                                                                                     \
   void rp_embree_occluded##K(const RpEmbree* e, const RpRay* rays, uint8_t* out, size_t n,         \
                              int coherent) {                                                        \
-    struct RTCIntersectContext ctx;                                                                 \
-    rp_context(&ctx, coherent);                                                                     \
+    RpQuery q;                                                                                      \
+    rp_query(&q, coherent);                                                                         \
     for (size_t i = 0; i < n; i += K) {                                                             \
       struct RTCRay##K r;                                                                           \
       int valid[K];                                                                                 \
       int count = rp_load_ray##K(&r, valid, rays + i, n - i);                                       \
-      rtcOccluded##K(valid, e->scene, &ctx, &r);                                                    \
+      RP_OCCLUDEDK(K, valid, e->scene, &q, &r);                                                     \
       for (int l = 0; l < count; l++) out[i + l] = r.tfar[l] == -INFINITY;                          \
     }                                                                                               \
   }
