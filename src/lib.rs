@@ -68,6 +68,7 @@ pub mod memory;
 pub mod ray;
 pub mod raysets;
 pub mod render;
+pub mod rng;
 pub mod scene;
 pub mod simd;
 

@@ -24,7 +24,7 @@ pub fn render_bytes_per_pixel(settings: &RenderSettings, exr: bool) -> u64 {
 pub fn render_bytes(settings: &RenderSettings, threads: usize, exr: bool) -> u64 {
     let pixels = settings.width as u64 * settings.height as u64;
     let per_sample = std::mem::size_of::<crate::Ray>()
-        + std::mem::size_of::<crate::render::sampler::Rng>()
+        + std::mem::size_of::<crate::rng::Rng>()
         + std::mem::size_of::<u32>()
         + std::mem::size_of::<crate::Hit>();
     let tile = (TILE * TILE) as u64 * PASS_SAMPLES.min(settings.samples_per_pixel.max(1)) as u64 * per_sample as u64;

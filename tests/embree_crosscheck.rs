@@ -26,7 +26,7 @@ use raypack::bench::{Method, Output, embree_methods, output_for, raypack_methods
 use raypack::embree::{EmbreeOptions, EmbreeQuality, EmbreeScene};
 use raypack::generate::{Mesh, grid, random_soup, uv_sphere};
 use raypack::raysets::{self, RaySet, RaySetKind};
-use raypack::render::sampler::Rng;
+use raypack::rng::Rng;
 use raypack::{BuildOptions, Hit, Material, Ray, Scene, SceneBuilder, Vec3};
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;

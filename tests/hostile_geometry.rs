@@ -102,7 +102,7 @@ fn rays_for(scene: &Scene, n: usize, points: &[Vec3]) -> Vec<Ray> {
 
 #[test]
 fn zero_area_slivers_and_duplicates() {
-    let mut rng = raypack::render::sampler::Rng::new(3, 9);
+    let mut rng = raypack::rng::Rng::new(3, 9);
     let mut r3 = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 - 1.0;
     let mut tris = Vec::new();
     let (mut zero, mut slivers) = (0, 0);
