@@ -5,7 +5,7 @@
 //! `A_left N_left + A_right N_right` is taken when it beats making a leaf. When the binning
 //! cannot separate the primitives (all centroids in one bin, or all equal), the builder
 //! falls back to an object-median split so that no node ever keeps all its primitives on
-//! one side (the classic infinite-recursion bug). Below [`super::MAX_DEPTH`]`- 40` it forces
+//! one side (the classic infinite-recursion bug). Below [`MAX_DEPTH`]`- 40` it forces
 //! median splits too, which bounds the depth of any tree.
 //!
 //! The build is deterministic and parallel: every subtree of `n` primitives owns a reserved
@@ -14,7 +14,8 @@
 //! runs in parallel chunks whose reduction (min/max and integer counts) is exact, so the
 //! tree is bit-identical whatever the thread count.
 
-use crate::bvh::{Bvh2, Bvh2Node, MAX_DEPTH};
+use crate::bvh::limits::MAX_DEPTH;
+use crate::bvh::{Bvh2, Bvh2Node};
 use crate::math::{Aabb, Vec3, Vec4};
 
 /// How much effort the builder spends on tree quality.

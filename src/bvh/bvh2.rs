@@ -1,7 +1,7 @@
 //! The binary BVH and its scalar traversal: the reference every faster kernel is tested
 //! against. Simple on purpose: one box test per node, near child first, a fixed stack.
 
-use crate::bvh::MAX_DEPTH;
+use crate::bvh::limits::MAX_DEPTH;
 use crate::math::{Aabb, Vec3};
 use crate::ray::{Hit, Ray};
 
