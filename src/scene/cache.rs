@@ -35,9 +35,9 @@
 //! watertight triangle blocks) is one more `Pod` array: a name, a `SectionWriter::push` in
 //! `store` and a `CacheFile::section_in_place` call in `read_accel`.
 
-use crate::bvh::{BuildOptions, Bvh2, Bvh2Node, Bvh8, Bvh8Node, BvhArray, DefaultTriBlock, LeafKind, MAX_DEPTH};
+use crate::bvh::{BuildOptions, Bvh2, Bvh2Node, Bvh8, Bvh8Node, BvhArray, DefaultTriBlock};
 use crate::geometry::TriangleTest;
-use crate::geometry::{Sphere4, Tri8, TriBlock};
+use crate::geometry::{Sphere4, Tri8};
 use crate::math::Aabb;
 use crate::scene::{CommitReport, Scene, SceneBuilder};
 use memmap2::Mmap;
@@ -620,98 +620,15 @@ fn read_accel(f: &CacheFile) -> Result<Accel, CacheError> {
     })
 }
 
-/// The ranges the traversal kernels index with: every child, block and primitive reference
-/// in range, each node reached once, depth at most [`MAX_DEPTH`], empty slots never hit.
-///
-/// Both builders store children after their parent (depth-first order), which this requires:
-/// one pass in index order then sees each node's depth before its children's, so the check
-/// is linear and cache-friendly (a depth-first walk with a stack took 11% of a cached start).
+/// The ranges the traversal kernels index with ([`crate::bvh::validate`]'s index checks):
+/// every child, block and primitive reference in range, each node reached once, depth at most
+/// [`crate::bvh::MAX_DEPTH`], empty slots never hit.
 fn check_accel(a: &Accel, num_prims: usize) -> Result<(), String> {
+    use crate::bvh::validate::{check_bvh2_indices, check_bvh8_indices};
     if let Some(b) = &a.bvh2 {
-        check_bvh2(b, num_prims)?;
+        check_bvh2_indices(b, num_prims).map_err(|e| format!("binary BVH: {e}"))?;
     }
-    check_bvh8(&a.bvh8, num_prims)
-}
-
-fn check_bvh2(bvh2: &Bvh2, num_prims: usize) -> Result<(), String> {
-    let n2 = &bvh2.nodes;
-    if n2.is_empty() {
-        return Err("binary BVH without a root".into());
-    }
-    if !bvh2.prim_ids.iter().all(|&p| (p as usize) < num_prims) {
-        return Err("binary BVH refers to a primitive that does not exist".into());
-    }
-    // depth[i]: 0 while node i is unreached, else its depth (root = 1). An empty tree is a
-    // root with `count == 0` that the traversal never enters.
-    let mut depth = vec![0u8; n2.len()];
-    depth[0] = u8::from(!bvh2.prim_ids.is_empty());
-    for (i, n) in n2.iter().enumerate() {
-        let d = depth[i];
-        if d == 0 {
-            continue;
-        }
-        let (start, count) = (n.start as usize, n.count as usize);
-        if n.is_leaf() {
-            if start + count > bvh2.prim_ids.len() {
-                return Err(format!("binary BVH leaf {i} out of range"));
-            }
-        } else if start <= i || start + 1 >= n2.len() || d as usize >= MAX_DEPTH {
-            return Err(format!("binary BVH node {i} has children out of range or too deep"));
-        } else {
-            for c in [start, start + 1] {
-                if std::mem::replace(&mut depth[c], d + 1) != 0 {
-                    return Err(format!("binary BVH node {c} reached twice"));
-                }
-            }
-        }
-    }
-
-    Ok(())
-}
-
-fn check_bvh8(b8: &Bvh8, num_prims: usize) -> Result<(), String> {
-    if b8.nodes.is_empty() {
-        return Err("8-wide BVH without a root".into());
-    }
-    let prim_ok = |p: u32| p == u32::MAX || (p as usize) < num_prims;
-    if !b8.tris.iter().all(|b| b.prim.iter().all(|&p| prim_ok(p)))
-        || !b8.spheres.iter().all(|b| b.prim.iter().all(|&p| prim_ok(p)))
-    {
-        return Err("8-wide BVH block refers to a primitive that does not exist".into());
-    }
-    let mut depth = vec![0u8; b8.nodes.len()];
-    depth[0] = 1;
-    for (i, n) in b8.nodes.iter().enumerate() {
-        let d = depth[i];
-        if d == 0 {
-            continue;
-        }
-        for (k, &c) in n.children.iter().enumerate() {
-            if c.is_empty() {
-                if n.child_bounds(k) != Aabb::EMPTY {
-                    return Err(format!("8-wide BVH node {i} has an empty slot {k} that can be hit"));
-                }
-            } else if !c.is_leaf() {
-                let j = c.node_index();
-                if j <= i || j >= b8.nodes.len() || d as usize >= MAX_DEPTH {
-                    return Err(format!("8-wide BVH node {i} has child {k} out of range or too deep"));
-                }
-                if std::mem::replace(&mut depth[j], d + 1) != 0 {
-                    return Err(format!("8-wide BVH node {j} reached twice"));
-                }
-            } else {
-                let (len, m) = match c.kind() {
-                    LeafKind::Triangles => (b8.tris.len(), DefaultTriBlock::M),
-                    LeafKind::Spheres => (b8.spheres.len(), Sphere4::M),
-                };
-                let last = c.lanes_of_block(c.block_count().saturating_sub(1), m);
-                if c.block_count() == 0 || c.first_block() + c.block_count() > len || last == 0 || last > m {
-                    return Err(format!("8-wide BVH node {i} has leaf {k} out of range"));
-                }
-            }
-        }
-    }
-    Ok(())
+    check_bvh8_indices(&a.bvh8, num_prims).map_err(|e| format!("8-wide BVH: {e}"))
 }
 
 fn io(p: &Path) -> impl Fn(std::io::Error) -> CacheError + '_ {
