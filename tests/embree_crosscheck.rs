@@ -2,7 +2,7 @@
 //!
 //! For each scene and ray set (primary in 4×4 tiles, diffuse bounces, shadow rays, random
 //! rays through the bounds, rays aimed at vertices and edges), the same rays are traced by
-//! raypack's scalar reference, by every kernel in `raypack::bench::RAYPACK_KERNELS`, and by
+//! raypack's scalar reference, by every kernel in `raypack::kernels::KERNELS`, and by
 //! Embree's `rtcIntersect1/8/16` and `rtcOccluded1/8/16` (plain and coherent, on BVHs built
 //! at MEDIUM and HIGH quality). Per ray, each answer is compared with the reference: hit or
 //! miss, `t` (relative 1e-5), primitive id where `t` is unique, occlusion.
@@ -22,9 +22,9 @@ mod common;
 
 use glam::DVec3;
 use rayon::prelude::*;
-use raypack::bench::{Method, Output, embree_methods, output_for, raypack_methods, trace};
 use raypack::embree::{EmbreeOptions, EmbreeQuality, EmbreeScene};
 use raypack::generate::{Mesh, grid, random_soup, uv_sphere};
+use raypack::methods::{Method, Output, embree_methods, output_for, raypack_methods, trace};
 use raypack::raysets::{self, RaySet, RaySetKind};
 use raypack::rng::Rng;
 use raypack::{BuildOptions, Hit, Material, Ray, Scene, SceneBuilder, Vec3};

@@ -59,6 +59,11 @@ impl Bvh2 {
         self.prim_ids.is_empty()
     }
 
+    /// Bytes of nodes and primitive ids.
+    pub fn bytes(&self) -> usize {
+        std::mem::size_of_val(self.nodes.as_slice()) + std::mem::size_of_val(self.prim_ids.as_slice())
+    }
+
     /// Closest hit. `test(prim, tfar)` intersects one primitive over `(ray.tnear, tfar]` and
     /// returns `(t, u, v)`; the traversal keeps the nearest.
     pub fn intersect(&self, ray: &Ray, mut test: impl FnMut(u32, f32) -> Option<(f32, f32, f32)>) -> Hit {

@@ -228,6 +228,14 @@ impl SceneBuilder {
         (kept.build(opts), report)
     }
 
+    /// The triangles [`SceneBuilder::commit`] keeps, and how many spheres it keeps, without
+    /// building anything: what another tracer builds over to compare with raypack (as
+    /// `raypack info --against embree` does with Embree).
+    pub fn into_kept_triangles(self) -> (TrianglesSoa, usize) {
+        let (kept, _) = self.filter();
+        (kept.triangles, kept.spheres.len())
+    }
+
     /// The first half of [`SceneBuilder::commit`]: drops the primitives that cannot be traced.
     pub(crate) fn filter(self) -> (Filtered, CommitReport) {
         let mut report = CommitReport::default();

@@ -3,6 +3,9 @@
 //! CS184's flags work as short options (`-t -s -l -m -r -f -a -H -c`), each with a long
 //! equivalent. `raypack SCENE [flags]` without a subcommand means `raypack render`.
 
+mod bench;
+mod info;
+
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use raypack::io::LoadError;
 use raypack::render::{self, IntegratorKind, RenderSettings};
@@ -243,11 +246,11 @@ enum CliError {
     #[error(transparent)]
     Load(#[from] LoadError),
     #[error(transparent)]
-    Info(#[from] raypack::info::InfoError),
+    Info(#[from] info::InfoError),
     #[error(transparent)]
     Image(#[from] render::ImageError),
     #[error(transparent)]
-    Bench(#[from] raypack::bench::BenchError),
+    Bench(#[from] bench::BenchError),
     #[error(transparent)]
     Output(#[from] raypack::io::output::OutputError),
     #[error("{0}")]
@@ -528,7 +531,7 @@ fn progress_bar(len: usize) -> indicatif::ProgressBar {
 }
 
 fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
-    use raypack::info::{InfoOptions, scene_info};
+    use info::{InfoOptions, scene_info};
     if a.threads == Some(0) {
         return Err(CliError::Usage("-t 0: need at least one thread".into()));
     }
@@ -566,7 +569,7 @@ fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
 }
 
 fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
-    use raypack::bench::{BenchSettings, BuildFigures, raypack_accel_bytes, run_bench};
+    use bench::{BenchSettings, BuildFigures, raypack_accel_bytes, run_bench};
     use raypack::io::output::{OutputOptions, check_target, write_file_with};
     let (width, height) = (a.resolution[0], a.resolution[1]);
     if width == 0 || height == 0 || width > 1 << 15 || height > 1 << 15 {
@@ -586,7 +589,7 @@ fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
         ..Default::default()
     };
     if settings.against_embree && !cfg!(feature = "embree") {
-        return Err(raypack::bench::BenchError::EmbreeNotBuilt.into());
+        return Err(bench::BenchError::EmbreeNotBuilt.into());
     }
     let json_opts = OutputOptions::protecting(&[&a.scene]);
     if let Some(p) = a.json.as_deref().filter(|p| *p != Path::new("-")) {
