@@ -1,7 +1,7 @@
 //! Micro-benchmarks of the SIMD building blocks, one ray-box or ray-primitive test per
 //! element: `cargo bench --bench kernels`.
 //!
-//! Each kernel is checked once against its scalar twin before it is timed (house rule 5).
+//! Each kernel is checked once against its scalar twin before it is timed (CONTRIBUTING.md, rule 5).
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use raypack::bvh::Bvh8Node;

@@ -1,4 +1,4 @@
-//! House rule 2: every SIMD kernel agrees with its scalar twin (property tests).
+//! CONTRIBUTING.md, rule 2: every SIMD kernel agrees with its scalar twin (property tests).
 
 use proptest::prelude::*;
 use raypack::bvh::Bvh8Node;
