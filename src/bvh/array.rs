@@ -9,12 +9,11 @@ use std::sync::Arc;
 /// Reads see a slice either way; the first mutable access to a mapped array
 /// ([`BvhArray::to_mut`], `DerefMut`) copies it into an owned one.
 ///
-/// Using the mapping in place is what makes a cached start cheap: copying the Stanford
-/// dragon's 59 MB BVH8 out of the mapping into fresh memory took 25–36 ms of a 60 ms start
-/// on this machine (page faults of the new memory, mostly), against nothing for pages the
-/// file's mapping already shares with the page cache.
+/// Using the mapping in place is what makes a cached start cheap: pages the file's mapping
+/// shares with the page cache cost nothing, where a copy pays a page fault per fresh page
+/// (PERFORMANCE.md, "BVH cache").
 ///
-/// The builder's large arrays are anonymous mappings ([`BvhArray::zeroed`]): zero pages that
+/// The builder's large arrays are anonymous mappings (`BvhArray::zeroed`): zero pages that
 /// the kernel provides on first touch, so the parallel tasks that fill them pay the page
 /// faults in parallel, and nothing writes them twice (a `Vec` of 64-byte-aligned blocks is
 /// zeroed by one thread with `memset`).

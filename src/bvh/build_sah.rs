@@ -110,7 +110,7 @@ const PARALLEL_SUBTREE_THRESHOLD: usize = 1 << 14;
 const FORCE_MEDIAN_DEPTH: usize = MAX_DEPTH - 40;
 
 /// One primitive as the builder sees it: its box and its id, as two 16-byte SIMD lanes
-/// (`lower.w` holds the id's bits XOR [`ID_BITS_BIAS`]; `upper.w` is 0). 32 bytes, so two
+/// (`lower.w` holds the id's bits XOR `ID_BITS_BIAS`; `upper.w` is 0). 32 bytes, so two
 /// fill a cache line.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
@@ -122,8 +122,7 @@ const _: () = assert!(std::mem::size_of::<BuildPrim>() == 32);
 
 /// Makes the id's bits in `lower.w` a normal float (exponent 127 for ids below 2^23): the
 /// builder's SIMD arithmetic also runs on the w lane, and a denormal there (a plain small
-/// id) costs a microcode assist per operation — it made `build_bvh2` 1.6× slower on the
-/// Stanford dragon (871k triangles, 1 thread: 554 ms against 340 ms).
+/// id) costs a microcode assist per operation (PERFORMANCE.md, "Builder").
 const ID_BITS_BIAS: u32 = 0x3f80_0000;
 
 impl BuildPrim {
@@ -392,6 +391,7 @@ fn choose_split(
             scratch.right_count[i] = cnt;
         }
         let (mut acc, mut cnt) = (Box4::EMPTY, 0u32);
+        #[allow(clippy::needless_range_loop)] // bins i and i + 1 of two arrays
         for i in 0..k - 1 {
             acc = acc.union(&b[i].bounds);
             cnt += b[i].count;

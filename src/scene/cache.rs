@@ -589,8 +589,8 @@ fn writable_by_others(dir: &Path) -> Option<String> {
 
 /// The first `len` bytes of `file` in fresh read-only anonymous memory (page-aligned, so the
 /// sections can be used in place as in a mapping of the file); a file cut short meanwhile is
-/// an error. (The page faults of the fresh memory are most of the cost: 40 ms for the
-/// dragon's 58 MB, whether one thread reads or all of them.)
+/// an error. (The page faults of the fresh memory are most of the cost: PERFORMANCE.md,
+/// "BVH cache".)
 fn copy_to_private_memory(file: &std::fs::File, len: u64) -> std::io::Result<Mmap> {
     let mut copy = memmap2::MmapMut::map_anon(len as usize)?;
     #[cfg(unix)]
