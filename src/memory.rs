@@ -57,10 +57,10 @@ pub struct Available {
 pub fn available() -> Option<Available> {
     let mut best: Option<Available> = None;
     let mut offer = |bytes: Option<u64>, source: &'static str| {
-        if let Some(bytes) = bytes {
-            if best.as_ref().is_none_or(|b| bytes < b.bytes) {
-                best = Some(Available { bytes, source });
-            }
+        if let Some(bytes) = bytes
+            && best.as_ref().is_none_or(|b| bytes < b.bytes)
+        {
+            best = Some(Available { bytes, source });
         }
     };
     let meminfo = std::fs::read_to_string("/proc/meminfo").ok();

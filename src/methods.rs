@@ -28,12 +28,17 @@ pub struct Method<'a> {
     pub run: Run<'a>,
 }
 
+/// A closest-hit function bound to its scene: one hit per ray.
+pub type IntersectRays<'a> = Box<dyn Fn(&[Ray], &mut [Hit]) + Sync + 'a>;
+/// An occlusion function bound to its scene: one flag per ray.
+pub type OccludedRays<'a> = Box<dyn Fn(&[Ray], &mut [bool]) + Sync + 'a>;
+
 /// A bound closest-hit or occlusion function.
 pub enum Run<'a> {
     /// Closest hit of each ray.
-    Intersect(Box<dyn Fn(&[Ray], &mut [Hit]) + Sync + 'a>),
+    Intersect(IntersectRays<'a>),
     /// Occlusion of each ray.
-    Occluded(Box<dyn Fn(&[Ray], &mut [bool]) + Sync + 'a>),
+    Occluded(OccludedRays<'a>),
 }
 
 impl Run<'_> {

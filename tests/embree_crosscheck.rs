@@ -345,6 +345,10 @@ enum Answer {
     Occluded(bool),
 }
 
+/// A ray on which a method and the reference differ: its index, the method's answer and the
+/// reference's.
+type Disagreement = (usize, Answer, Answer);
+
 /// Whether `other` agrees with the reference without needing the oracle.
 fn agrees(scene: &Scene, ray: &Ray, reference: &Hit, other: &Hit) -> bool {
     match (reference.is_hit(), other.is_hit()) {
@@ -385,11 +389,12 @@ fn compare_set(scene: &Scene, set: &RaySet, methods: &[Method<'_>]) -> BTreeMap<
     let ref_occ: Vec<bool> = rays.par_iter().map(|r| scene.occluded1_reference(r)).collect();
 
     // Phase 1: every method's disagreements with the reference.
-    let mut disagreements: Vec<(String, Vec<(usize, Answer, Answer)>)> = Vec::new();
+    // Per method: its name and (ray, its answer, the reference's) where they differ.
+    let mut disagreements: Vec<(String, Vec<Disagreement>)> = Vec::new();
     for m in methods {
         let mut out = output_for(&m.run, rays.len());
         trace(&m.run, rays, &mut out);
-        let list: Vec<(usize, Answer, Answer)> = match &out {
+        let list: Vec<Disagreement> = match &out {
             Output::Hits(h) => (0..rays.len())
                 .into_par_iter()
                 .filter(|&i| !agrees(scene, &rays[i], &ref_hits[i], &h[i]))

@@ -128,10 +128,10 @@ impl SceneBuilder {
         material: MaterialId,
     ) -> Result<(), SceneError> {
         self.check_material(material)?;
-        if let Some(n) = normals {
-            if n.len() != positions.len() {
-                return Err(SceneError::NormalCount { normals: n.len(), vertices: positions.len() });
-            }
+        if let Some(n) = normals
+            && n.len() != positions.len()
+        {
+            return Err(SceneError::NormalCount { normals: n.len(), vertices: positions.len() });
         }
         for (t, tri) in indices.iter().enumerate() {
             if let Some(&index) = tri.iter().find(|&&i| i as usize >= positions.len()) {

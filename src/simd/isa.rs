@@ -5,9 +5,9 @@
 //! whole process ([`Isa::default_for_process`]), for tests and comparisons, and each
 //! [`crate::Scene`] can be set to any supported tier ([`crate::Scene::set_isa`]).
 //!
-//! A kernel is an [`IsaOp`]: a small struct holding its arguments whose `run::<I>()` is
+//! A kernel is an `IsaOp`: a small struct holding its arguments whose `run::<I>()` is
 //! generic over the lane set `I` ([`IsaLanes`]) and `#[inline(always)]` all the way down.
-//! [`dispatch`] instantiates it once per tier inside a `#[target_feature]` function (the
+//! `dispatch` instantiates it once per tier inside a `#[target_feature]` function (the
 //! approach of Embree, and of the `pulp` and `multiversion` crates), so one kernel source
 //! compiles to SSE2, AVX2 and AVX-512 code in one binary.
 

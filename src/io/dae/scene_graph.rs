@@ -15,7 +15,7 @@ pub const MAX_NODE_DEPTH: usize = 256;
 /// What instancing may expand a document to, in node visits plus instanced vertices,
 /// triangles and spheres: `max(MIN_INSTANCING_BUDGET, INSTANCING_BUDGET_PER_BYTE × file size)`,
 /// or [`BUDGET_PER_ALLOWED_PRIMITIVE`] units per primitive when that is more and
-/// [`DaeOptions::max_primitives`] is set. `instance_node` and `instance_geometry` multiply: 30
+/// [`DaeOptions::max_primitives`](super::DaeOptions::max_primitives) is set. `instance_node` and `instance_geometry` multiply: 30
 /// nested nodes that each instance the next twice are 2³⁰ copies from a 2 kB file. Without a
 /// cap such a file takes hours and all memory; with it, an error names the element where the
 /// budget ran out. A legitimate file may still expand a lot (a 292 KB file to 11.4 M
@@ -26,7 +26,7 @@ pub const MIN_INSTANCING_BUDGET: usize = 1 << 20;
 /// Instancing that adds at least this many primitives to those the file defines is reported
 /// in a warning (how many geometries, how many primitives, by what factor).
 pub const REPORTED_EXPANSION: u64 = 1 << 20;
-/// Instancing budget units per primitive that [`DaeOptions::max_primitives`] allows: room for
+/// Instancing budget units per primitive that [`DaeOptions::max_primitives`](super::DaeOptions::max_primitives) allows: room for
 /// a triangle soup's three vertices and the triangle itself.
 pub const BUDGET_PER_ALLOWED_PRIMITIVE: usize = 4;
 
@@ -153,7 +153,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
     }
 
     /// Counts `count` more primitives of geometry `geom` instanced at `at`, or fails when
-    /// that passes [`DaeOptions::max_primitives`].
+    /// that passes [`DaeOptions::max_primitives`](super::DaeOptions::max_primitives).
     pub(super) fn add_primitives(&mut self, at: Node, geom: Node, count: usize) -> Result<(), LoadError> {
         self.defined.insert(geom.id(), count);
         self.primitives = self.primitives.saturating_add(count as u64);
