@@ -13,6 +13,9 @@
 //! indices, and a final pass compacts the slots in depth-first order. Binning of large nodes
 //! runs in parallel chunks whose reduction (min/max and integer counts) is exact, so the
 //! tree is bit-identical whatever the thread count.
+//!
+//! (One file past 600 lines: binning, split choice, partitioning and compaction are the steps
+//! of one algorithm over the same primitive, bin and slot types, read top to bottom.)
 
 use crate::bvh::limits::MAX_DEPTH;
 use crate::bvh::{Bvh2, Bvh2Node};

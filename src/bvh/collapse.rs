@@ -18,6 +18,9 @@
 //! [`pad_outward`] is monotone); the scene's builder makes no such leaves. The greedy
 //! alternative (repeatedly open the child of largest area, as Embree's BVH8 builder does) is
 //! kept for comparison ([`CollapseMethod::Greedy`]; PERFORMANCE.md, "Collapse").
+//!
+//! (A little past 600 lines: the dynamic program, its decisions' encoding and the emission of
+//! nodes and blocks that replays them are one algorithm.)
 
 use crate::bvh::build_sah::pad_outward;
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};

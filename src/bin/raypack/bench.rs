@@ -6,11 +6,14 @@
 //! `runs` times; the median time is reported. `--isa` lowers the scene's ISA tier and limits
 //! Embree to the same tier.
 
+use crate::{BenchArgs, CliError, check_memory, load, print_warnings};
 #[cfg(feature = "embree")]
 use raypack::methods::embree_methods;
 use raypack::methods::{Method, output_for, raypack_methods, trace};
 use raypack::raysets::{self, Checksum};
+use raypack::{BuildOptions, BuildQuality};
 use raypack::{Isa, Scene};
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 /// Bytes of raypack's acceleration structure over `scene`: the BVH8 nodes and its leaf blocks
@@ -379,6 +382,78 @@ impl BenchReport {
             "results": results,
         })
     }
+}
+
+/// `raypack bench`: checks the settings and the memory, builds the scene, runs [`run_bench`] and
+/// prints or writes the report.
+pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
+    use raypack::io::output::{OutputOptions, check_target, write_file_with};
+    let (width, height) = (a.resolution[0], a.resolution[1]);
+    if width == 0 || height == 0 || width > 1 << 15 || height > 1 << 15 {
+        return Err(CliError::Usage(format!("-r {width} {height}: width and height must be between 1 and 32768")));
+    }
+    if a.runs == 0 {
+        return Err(CliError::Usage("--runs 0: need at least one timed run".into()));
+    }
+    let settings = BenchSettings {
+        width,
+        height,
+        runs: a.runs,
+        against_embree: a.against.is_some(),
+        isa: a.isa,
+        methods: a.methods.clone(),
+        threads: if a.threads.is_empty() { vec![1, 0] } else { a.threads.clone() },
+        ..Default::default()
+    };
+    if settings.against_embree && !cfg!(feature = "embree") {
+        return Err(BenchError::EmbreeNotBuilt.into());
+    }
+    let json_opts = OutputOptions::protecting(&[&a.scene]);
+    if let Some(p) = a.json.as_deref().filter(|p| *p != Path::new("-")) {
+        check_target(p, &json_opts)?;
+    }
+    let per_ray = raypack::memory::BENCH_BYTES_PER_PIXEL;
+    check_memory(width, height, (width * height) as u64 * per_ray, per_ray)?;
+    let (builder, warnings) = load(Some(&a.scene), a.max_primitives)?;
+    print_warnings(&warnings);
+    let quality: BuildQuality = a.quality.into();
+    let t = Instant::now();
+    // The binary BVH stays for the reference rows and the checksums they anchor.
+    let opts = BuildOptions { quality, watertight: a.watertight, keep_bvh2: true, ..BuildOptions::default() };
+    let (mut scene, report) = match a.bvh_cache.as_deref() {
+        None => builder.commit(&opts),
+        Some(dir) => {
+            let (scene, report, cache) = builder.commit_cached(&opts, dir);
+            for w in cache.warnings() {
+                eprintln!("[raypack] warning: {w}");
+            }
+            if cache.loaded {
+                eprintln!("[raypack] BVH loaded from {} (the build time below is the load time)", cache.path.display());
+            }
+            (scene, report)
+        }
+    };
+    let seconds = t.elapsed().as_secs_f64();
+    if report.dropped() > 0 {
+        eprintln!("[raypack] warning: {report}");
+    }
+    let build = BuildFigures {
+        tracer: "raypack",
+        quality: format!("bvh8 {} {}", format!("{quality:?}").to_lowercase(), scene.triangle_test().name()),
+        seconds,
+        bytes: raypack_accel_bytes(&scene) as u64,
+    };
+    let name = a.scene.display().to_string();
+    let out = run_bench(&name, &mut scene, build, &settings, &mut |line| eprintln!("[raypack] {line}"))?;
+    match a.json.as_deref() {
+        Some(p) if p == Path::new("-") => println!("{:#}", out.json()),
+        Some(p) => {
+            write_file_with(p, format!("{:#}\n", out.json()).as_bytes(), &json_opts)?;
+            print!("{}", out.table());
+        }
+        None => print!("{}", out.table()),
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -2,6 +2,7 @@
 //! tree statistics per build quality, bytes per triangle of the scene store and of the
 //! acceleration structures, and the peak resident memory of the process.
 
+use crate::{CliError, InfoArgs, print_warnings};
 use raypack::bvh::{BuildOptions, BuildQuality, Bvh8Stats, BvhStats};
 use raypack::io::LoadError;
 use raypack::math::Aabb;
@@ -408,5 +409,43 @@ impl SceneInfo {
             })).collect::<Vec<_>>(),
             "peak_resident_bytes": self.peak_resident_bytes,
         })
+    }
+}
+
+/// `raypack info`: the figures of [`scene_info`] as text or JSON.
+pub(crate) fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
+    if a.threads == Some(0) {
+        return Err(CliError::Usage("-t 0: need at least one thread".into()));
+    }
+    let mut opts = InfoOptions {
+        load: raypack::io::LoadOptions { max_primitives: a.max_primitives },
+        cache_dir: a.bvh_cache.clone(),
+        validate: a.validate,
+        keep_bvh2: a.keep_bvh2,
+        against_embree: a.against.is_some(),
+        embree_first: a.embree_first,
+        isa: a.isa,
+        ..InfoOptions::default()
+    };
+    if let Some(q) = a.quality {
+        opts.qualities = vec![q.into()];
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads.unwrap_or(0))
+        .build()
+        .map_err(|e| CliError::Usage(e.to_string()))?;
+    let info = pool.install(|| scene_info(&a.scene, &opts))?;
+    print_warnings(&info.warnings);
+    for w in info.builds.iter().flat_map(|b| &b.cache_warnings) {
+        eprintln!("[raypack] warning: {w}");
+    }
+    if a.json {
+        println!("{:#}", info.json());
+    } else {
+        print!("{}", info.text());
+    }
+    match info.builds.iter().find_map(|b| b.valid.as_ref().and_then(|v| v.as_ref().err())) {
+        Some(e) => Err(CliError::Usage(format!("BVH invalid: {e}"))),
+        None => Ok(()),
     }
 }
