@@ -3,9 +3,9 @@
 //! `raypack bench --against embree`, single-threaded, under criterion's statistics.
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use raypack::bench::{Output, embree_methods, output_for, raypack_methods, trace};
 use raypack::embree::{EmbreeQuality, EmbreeScene};
 use raypack::generate::{Mesh, random_soup, torus_knot};
+use raypack::methods::{Output, embree_methods, output_for, raypack_methods, trace};
 use raypack::raysets::bench_sets;
 use raypack::{BuildOptions, Material, Scene, SceneBuilder, Vec3};
 
@@ -50,7 +50,7 @@ fn bench(c: &mut Criterion) {
 }
 
 /// The reference's hit count for the query `run` answers.
-fn ref_out_checksum(ref_out: &Output, rays: &[raypack::Ray], run: &raypack::bench::Run<'_>, scene: &Scene) -> u64 {
+fn ref_out_checksum(ref_out: &Output, rays: &[raypack::Ray], run: &raypack::methods::Run<'_>, scene: &Scene) -> u64 {
     if run.is_occlusion() {
         rays.iter().filter(|r| scene.occluded1_reference(r)).count() as u64
     } else {

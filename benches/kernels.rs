@@ -1,7 +1,7 @@
 //! Micro-benchmarks of the SIMD building blocks, one ray-box or ray-primitive test per
 //! element: `cargo bench --bench kernels`.
 //!
-//! Each kernel is checked once against its scalar twin before it is timed (house rule 5).
+//! Each kernel is checked once against its scalar twin before it is timed (CONTRIBUTING.md, rule 5).
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use raypack::bvh::Bvh8Node;
@@ -10,7 +10,7 @@ use raypack::bvh::traverse_packet::PacketRays;
 use raypack::bvh::traverse1::Ray1;
 use raypack::geometry::tri_block::moller_trumbore;
 use raypack::geometry::{Sphere4, Tri4, Tri8, TriBlock, intersect_triangle};
-use raypack::render::sampler::Rng;
+use raypack::rng::Rng;
 use raypack::simd::{F32x4, F32x8, F32x16, Lanes, Vec3x};
 use raypack::{Aabb, Ray, Vec3};
 use std::hint::black_box;

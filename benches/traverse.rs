@@ -1,17 +1,17 @@
 //! Build and traversal on generated scenes: `cargo bench --bench traverse`.
 //!
 //! * `build/*`: the binned-SAH BVH2 and its collapse into the BVH8, per primitive;
-//! * `traverse/<scene>/<rays>`: every kernel of `raypack::bench::RAYPACK_KERNELS` on the
+//! * `traverse/<scene>/<rays>`: every kernel of `raypack::kernels::KERNELS` on the
 //!   standard ray sets (camera rays in 4 x 4 tiles, diffuse bounces, shadow rays), one
 //!   thread, in rays per second (criterion's element throughput).
 //!
 //! Every kernel's hit count is checked against the scalar reference once before timing, and
-//! each scene's BVH quality is printed beside the speeds (house rule 5).
+//! each scene's BVH quality is printed beside the speeds (CONTRIBUTING.md, rule 5).
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use raypack::bench::{output_for, raypack_methods, trace};
 use raypack::bvh::{BuildPrim, Bvh8, CollapseOptions, build_bvh2, collapse};
 use raypack::generate::{Mesh, grid, random_soup, torus_knot, uv_sphere};
+use raypack::methods::{output_for, raypack_methods, trace};
 use raypack::raysets::bench_sets;
 use raypack::{BuildOptions, Material, Scene, SceneBuilder, Vec3};
 

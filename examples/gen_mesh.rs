@@ -17,7 +17,7 @@ fn main() -> ExitCode {
         eprintln!("usage: gen_mesh TRIANGLES OUT.ply   (TRIANGLES >= 64)");
         return ExitCode::from(2);
     };
-    if count < 64 || count > 1 << 31 {
+    if !(64..=1 << 31).contains(&count) {
         eprintln!("gen_mesh: TRIANGLES must be between 64 and 2^31, not {count}");
         return ExitCode::from(2);
     }

@@ -3,7 +3,7 @@
 //! All generators are deterministic functions of their arguments (seeded where random).
 
 use crate::math::Vec3;
-use crate::render::sampler::Rng;
+use crate::rng::Rng;
 
 /// An indexed triangle mesh.
 #[derive(Clone, Debug, Default, PartialEq)]

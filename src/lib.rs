@@ -54,20 +54,20 @@
 //! ```
 #![deny(missing_docs)]
 
-pub mod bench;
 pub mod bvh;
 #[cfg(feature = "embree")]
 pub mod embree;
 pub mod generate;
 pub mod geometry;
-pub mod info;
 pub mod io;
 pub mod kernels;
 pub mod math;
 pub mod memory;
+pub mod methods;
 pub mod ray;
 pub mod raysets;
 pub mod render;
+pub mod rng;
 pub mod scene;
 pub mod simd;
 

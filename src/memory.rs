@@ -1,10 +1,14 @@
 //! Memory a command will need, estimated before it starts, and memory the process may use:
-//! a size that cannot fit is refused up front instead of aborting minutes later.
+//! a size that cannot fit is refused up front instead of aborting minutes later. Also what a
+//! committed scene holds ([`store_bytes`]; the BVHs count their own, [`crate::bvh::Bvh8::bytes`]
+//! and [`crate::bvh::Bvh2::bytes`]) and what the process used at its peak
+//! ([`peak_resident_bytes`], [`PeakResident`]).
 //!
 //! The estimates count the buffers that grow with the image (or ray set) size; the scene and
 //! its BVH come on top, so an estimate that barely fits may still fail.
 
 use crate::render::{PASS_SAMPLES, RenderSettings, TILE};
+use crate::scene::Scene;
 
 /// Bytes per pixel that a render keeps until its image is written: the tile results
 /// ([`crate::render::adaptive::PixelEstimate`]), the film (linear RGB), the sample counts and
@@ -24,7 +28,7 @@ pub fn render_bytes_per_pixel(settings: &RenderSettings, exr: bool) -> u64 {
 pub fn render_bytes(settings: &RenderSettings, threads: usize, exr: bool) -> u64 {
     let pixels = settings.width as u64 * settings.height as u64;
     let per_sample = std::mem::size_of::<crate::Ray>()
-        + std::mem::size_of::<crate::render::sampler::Rng>()
+        + std::mem::size_of::<crate::rng::Rng>()
         + std::mem::size_of::<u32>()
         + std::mem::size_of::<crate::Hit>();
     let tile = (TILE * TILE) as u64 * PASS_SAMPLES.min(settings.samples_per_pixel.max(1)) as u64 * per_sample as u64;
@@ -53,10 +57,10 @@ pub struct Available {
 pub fn available() -> Option<Available> {
     let mut best: Option<Available> = None;
     let mut offer = |bytes: Option<u64>, source: &'static str| {
-        if let Some(bytes) = bytes {
-            if best.as_ref().is_none_or(|b| bytes < b.bytes) {
-                best = Some(Available { bytes, source });
-            }
+        if let Some(bytes) = bytes
+            && best.as_ref().is_none_or(|b| bytes < b.bytes)
+        {
+            best = Some(Available { bytes, source });
         }
     };
     let meminfo = std::fs::read_to_string("/proc/meminfo").ok();
@@ -81,6 +85,52 @@ pub fn available() -> Option<Available> {
     #[cfg(not(unix))]
     let _ = used;
     best
+}
+
+/// Bytes of a committed scene's geometry store: vertex positions and normals, indices,
+/// per-triangle materials and spheres (materials, lights and camera excluded).
+pub fn store_bytes(scene: &Scene) -> usize {
+    let t = &scene.triangles;
+    let s = &scene.spheres;
+    std::mem::size_of_val(t.positions.as_slice())
+        + std::mem::size_of_val(t.normals.as_slice())
+        + std::mem::size_of_val(t.indices.as_slice())
+        + std::mem::size_of_val(t.material.as_slice())
+        + std::mem::size_of_val(s.center.as_slice())
+        + std::mem::size_of_val(s.radius.as_slice())
+        + std::mem::size_of_val(s.material.as_slice())
+}
+
+/// Peak resident set size of this process (`VmHWM` of `/proc/self/status`). Linux only:
+/// `None` elsewhere or when the file cannot be read.
+pub fn peak_resident_bytes() -> Option<u64> {
+    proc_status_bytes("VmHWM:")
+}
+
+/// Measures how much a step raises the process's peak resident memory: resets the kernel's
+/// high-water mark (`/proc/self/clear_refs`, Linux ≥ 4.0) and remembers the resident size;
+/// [`PeakResident::added`] then gives the new high-water mark minus that size, i.e. the peak
+/// memory of the step, temporaries included. `None` where Linux's files are missing.
+pub struct PeakResident {
+    resident_before: Option<u64>,
+}
+
+impl PeakResident {
+    /// Starts a measurement.
+    pub fn start() -> Self {
+        let reset = std::fs::write("/proc/self/clear_refs", "5").is_ok();
+        Self { resident_before: if reset { proc_status_bytes("VmRSS:") } else { None } }
+    }
+
+    /// Peak bytes added since [`PeakResident::start`].
+    pub fn added(&self) -> Option<u64> {
+        Some(peak_resident_bytes()?.saturating_sub(self.resident_before?))
+    }
+}
+
+/// A `kB` field of `/proc/self/status`, in bytes.
+fn proc_status_bytes(field: &str) -> Option<u64> {
+    kib_field(&std::fs::read_to_string("/proc/self/status").ok()?, field)
 }
 
 /// A `NAME: N kB` field of a `/proc` file, in bytes.
@@ -151,6 +201,18 @@ mod tests {
         assert_eq!(kib_field("x", "MemAvailable:"), None);
         if cfg!(target_os = "linux") {
             assert!(available().is_some_and(|a| a.bytes > 0));
+        }
+    }
+
+    #[test]
+    fn peak_memory_is_read_on_linux() {
+        let peak = peak_resident_bytes();
+        if cfg!(target_os = "linux") {
+            // At least the pages this vector touches.
+            let v = vec![1u8; 8 << 20];
+            assert!(peak_resident_bytes().unwrap() >= v.len() as u64 && v.iter().all(|&b| b == 1));
+        } else {
+            assert_eq!(peak, None);
         }
     }
 }

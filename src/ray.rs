@@ -156,6 +156,7 @@ pub trait RayPacket {
     /// K lanes of the ISA `I`.
     type Lanes<I: crate::simd::IsaLanes>: crate::simd::Lanes;
     /// The rows `org_x, org_y, org_z`, `dir_x, dir_y, dir_z`, `tnear`, `tfar`.
+    #[allow(clippy::type_complexity)] // the four rows, named in the line above
     fn ray_rows(&self) -> ([&[f32]; 3], [&[f32]; 3], &[f32], &[f32]);
     /// Writes lane `i`'s result: `tfar = t`, `u`, `v`, `prim` for a hit, `prim = Hit::NONE`
     /// (and nothing else) for a miss.

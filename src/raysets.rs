@@ -18,7 +18,7 @@
 
 use crate::math::{Aabb, Vec3, orthonormal_basis};
 use crate::ray::{Hit, Ray};
-use crate::render::sampler::Rng;
+use crate::rng::Rng;
 use crate::scene::{Camera, Scene};
 
 /// Side of the square pixel tiles that primary rays are ordered in.

@@ -10,7 +10,7 @@ use raypack::bvh::{Bvh8, CollapseMethod, CollapseOptions, NoCount, collapse};
 use raypack::generate::{grid, random_soup, uv_sphere};
 use raypack::geometry::{Tri4, Tri8, TriBlock};
 use raypack::kernels::Results;
-use raypack::render::sampler::Rng;
+use raypack::rng::Rng;
 use raypack::{BuildOptions, Camera, Hit, Isa, Ray, RayPacket8, RayPacket16, Scene, Vec3};
 
 fn prim_bounds(scene: &Scene) -> Vec<raypack::Aabb> {

@@ -261,8 +261,8 @@ fn cli_reports_loads_and_rebuilds() {
         assert_eq!(v["triangles"], knot.indices.len());
         (v["builds"][0]["from_cache"].as_bool().unwrap(), err)
     };
-    assert_eq!(info(&[]).0, false);
-    assert_eq!(info(&["-t", "1"]).0, true);
+    assert!(!info(&[]).0, "the first start builds");
+    assert!(info(&["-t", "1"]).0, "the second start loads from the cache");
     let file = std::fs::read_dir(&cache).unwrap().next().unwrap().unwrap().path();
     let mut bytes = std::fs::read(&file).unwrap();
     let n = bytes.len();

@@ -2,7 +2,7 @@
 //!
 //! For each scene and ray set (primary in 4×4 tiles, diffuse bounces, shadow rays, random
 //! rays through the bounds, rays aimed at vertices and edges), the same rays are traced by
-//! raypack's scalar reference, by every kernel in `raypack::bench::RAYPACK_KERNELS`, and by
+//! raypack's scalar reference, by every kernel in `raypack::kernels::KERNELS`, and by
 //! Embree's `rtcIntersect1/8/16` and `rtcOccluded1/8/16` (plain and coherent, on BVHs built
 //! at MEDIUM and HIGH quality). Per ray, each answer is compared with the reference: hit or
 //! miss, `t` (relative 1e-5), primitive id where `t` is unique, occlusion.
@@ -22,11 +22,11 @@ mod common;
 
 use glam::DVec3;
 use rayon::prelude::*;
-use raypack::bench::{Method, Output, embree_methods, output_for, raypack_methods, trace};
 use raypack::embree::{EmbreeOptions, EmbreeQuality, EmbreeScene};
 use raypack::generate::{Mesh, grid, random_soup, uv_sphere};
+use raypack::methods::{Method, Output, embree_methods, output_for, raypack_methods, trace};
 use raypack::raysets::{self, RaySet, RaySetKind};
-use raypack::render::sampler::Rng;
+use raypack::rng::Rng;
 use raypack::{BuildOptions, Hit, Isa, Material, Ray, Scene, SceneBuilder, Vec3};
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -345,6 +345,10 @@ enum Answer {
     Occluded(bool),
 }
 
+/// A ray on which a method and the reference differ: its index, the method's answer and the
+/// reference's.
+type Disagreement = (usize, Answer, Answer);
+
 /// Whether `other` agrees with the reference without needing the oracle.
 fn agrees(scene: &Scene, ray: &Ray, reference: &Hit, other: &Hit) -> bool {
     match (reference.is_hit(), other.is_hit()) {
@@ -385,11 +389,12 @@ fn compare_set(scene: &Scene, set: &RaySet, methods: &[Method<'_>]) -> BTreeMap<
     let ref_occ: Vec<bool> = rays.par_iter().map(|r| scene.occluded1_reference(r)).collect();
 
     // Phase 1: every method's disagreements with the reference.
-    let mut disagreements: Vec<(String, Vec<(usize, Answer, Answer)>)> = Vec::new();
+    // Per method: its name and (ray, its answer, the reference's) where they differ.
+    let mut disagreements: Vec<(String, Vec<Disagreement>)> = Vec::new();
     for m in methods {
         let mut out = output_for(&m.run, rays.len());
         trace(&m.run, rays, &mut out);
-        let list: Vec<(usize, Answer, Answer)> = match &out {
+        let list: Vec<Disagreement> = match &out {
             Output::Hits(h) => (0..rays.len())
                 .into_par_iter()
                 .filter(|&i| !agrees(scene, &rays[i], &ref_hits[i], &h[i]))

@@ -102,7 +102,7 @@ fn rays_for(scene: &Scene, n: usize, points: &[Vec3]) -> Vec<Ray> {
 
 #[test]
 fn zero_area_slivers_and_duplicates() {
-    let mut rng = raypack::render::sampler::Rng::new(3, 9);
+    let mut rng = raypack::rng::Rng::new(3, 9);
     let mut r3 = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 - 1.0;
     let mut tris = Vec::new();
     let (mut zero, mut slivers) = (0, 0);
@@ -161,7 +161,7 @@ fn everything_at_one_point() {
 #[test]
 fn empty_and_single_primitive_scenes() {
     let one = soup(&[[Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, -1.0, 0.0), Vec3::new(0.0, 1.0, 0.0)]]);
-    let cases: [(&str, Mesh, Vec<(Vec3, f32)>); 4] = [
+    let cases = [
         ("empty", Mesh::default(), vec![]),
         ("only dropped primitives", soup(&[[Vec3::ZERO; 3], [Vec3::NAN, Vec3::X, Vec3::Y]]), vec![(Vec3::ZERO, -1.0)]),
         ("one triangle", one, vec![]),

@@ -408,7 +408,7 @@ fn adaptive_sampling_stops_early_only_where_flat() {
         for x in 0..w {
             let r = camera.generate_ray((x as f32 + 0.5) / w as f32, 1.0 - (y as f32 + 0.5) / h as f32);
             let n = out.samples_per_pixel[y * w + x];
-            assert!((32..=512).contains(&n) && n % 32 == 0, "samples come in whole batches: {n}");
+            assert!((32..=512).contains(&n) && n.is_multiple_of(32), "samples come in whole batches: {n}");
             if r.dir.y > 0.02 {
                 sky.push(n);
                 assert!((out.film.get(x, y).x - 0.2).abs() < 1e-6, "the mean of the samples taken");

@@ -1,4 +1,4 @@
-//! House rule 2: every SIMD kernel agrees with its scalar twin (property tests).
+//! CONTRIBUTING.md, rule 2: every SIMD kernel agrees with its scalar twin (property tests).
 
 use proptest::prelude::*;
 use raypack::bvh::Bvh8Node;
@@ -204,10 +204,10 @@ proptest! {
                 let scalar = raypack::bvh::bvh2::slab_test(b, r.origin, r.inv_dir(), r.tnear, r.tfar).is_some();
                 prop_assert_eq!(m >> k & 1 == 1, scalar, "lane {} box {}", k, i);
             }
-            if let Some(fr) = &fr {
-                if m != 0 {
-                    prop_assert!(fr.intersect_node(&n).0 >> i & 1 == 1, "frustum missed box {} hit by lanes {:b}", i, m);
-                }
+            if let Some(fr) = &fr
+                && m != 0
+            {
+                prop_assert!(fr.intersect_node(&n).0 >> i & 1 == 1, "frustum missed box {} hit by lanes {:b}", i, m);
             }
         }
     }

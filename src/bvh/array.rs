@@ -9,10 +9,9 @@ use std::sync::Arc;
 /// Reads see a slice either way; the first mutable access to a mapped array
 /// ([`BvhArray::to_mut`], `DerefMut`) copies it into an owned one.
 ///
-// Using the mapping in place is what makes a cached start cheap: copying the Stanford
-// dragon's 59 MB BVH8 out of the mapping into fresh memory took 25–36 ms of a 60 ms start
-// on this machine (page faults of the new memory, mostly), against nothing for pages the
-// file's mapping already shares with the page cache.
+/// Using the mapping in place is what makes a cached start cheap: pages the file's mapping
+/// shares with the page cache cost nothing, where a copy pays a page fault per fresh page
+/// (PERFORMANCE.md, "BVH cache").
 ///
 /// The builder's large arrays are anonymous mappings (`BvhArray::zeroed`): zero pages that
 /// the kernel provides on first touch, so the parallel tasks that fill them pay the page
@@ -54,9 +53,8 @@ impl<T: bytemuck::Pod> View<T> {
         Self { ptr: std::ptr::NonNull::from(s).cast(), len: s.len() }
     }
 
-    /// The elements.
-    // Cast once per query, not per access: beetle diffuse rays, callgrind, `Scene::intersect1`
-    // on AVX2: 863 -> 822 instructions per ray.
+    /// The elements. Beetle diffuse rays, callgrind, `Scene::intersect1` on AVX2: 863 -> 822
+    /// instructions per ray against casting at every access.
     #[inline(always)]
     fn slice(&self) -> &[T] {
         // SAFETY: `ptr` and `len` describe the cast of the mapping's bytes made in `View::of`;

@@ -5,7 +5,7 @@
 //! `A_left N_left + A_right N_right` is taken when it beats making a leaf. When the binning
 //! cannot separate the primitives (all centroids in one bin, or all equal), the builder
 //! falls back to an object-median split so that no node ever keeps all its primitives on
-//! one side (the classic infinite-recursion bug). Below [`super::MAX_DEPTH`]`- 40` it forces
+//! one side (the classic infinite-recursion bug). Below [`MAX_DEPTH`]`- 40` it forces
 //! median splits too, which bounds the depth of any tree.
 //!
 //! The build is deterministic and parallel: every subtree of `n` primitives owns a reserved
@@ -13,8 +13,12 @@
 //! indices, and a final pass compacts the slots in depth-first order. Binning of large nodes
 //! runs in parallel chunks whose reduction (min/max and integer counts) is exact, so the
 //! tree is bit-identical whatever the thread count.
+//!
+//! (One file past 600 lines: binning, split choice, partitioning and compaction are the steps
+//! of one algorithm over the same primitive, bin and slot types, read top to bottom.)
 
-use crate::bvh::{Bvh2, Bvh2Node, MAX_DEPTH};
+use crate::bvh::limits::MAX_DEPTH;
+use crate::bvh::{Bvh2, Bvh2Node};
 use crate::math::{Aabb, Vec3, Vec4};
 
 /// How much effort the builder spends on tree quality.
@@ -109,7 +113,7 @@ const PARALLEL_SUBTREE_THRESHOLD: usize = 1 << 14;
 const FORCE_MEDIAN_DEPTH: usize = MAX_DEPTH - 40;
 
 /// One primitive as the builder sees it: its box and its id, as two 16-byte SIMD lanes
-/// (`lower.w` holds the id's bits XOR [`ID_BITS_BIAS`]; `upper.w` is 0). 32 bytes, so two
+/// (`lower.w` holds the id's bits XOR `ID_BITS_BIAS`; `upper.w` is 0). 32 bytes, so two
 /// fill a cache line.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
@@ -121,8 +125,7 @@ const _: () = assert!(std::mem::size_of::<BuildPrim>() == 32);
 
 /// Makes the id's bits in `lower.w` a normal float (exponent 127 for ids below 2^23): the
 /// builder's SIMD arithmetic also runs on the w lane, and a denormal there (a plain small
-/// id) costs a microcode assist per operation — it made `build_bvh2` 1.6× slower on the
-/// Stanford dragon (871k triangles, 1 thread: 554 ms against 340 ms).
+/// id) costs a microcode assist per operation (PERFORMANCE.md, "Builder").
 const ID_BITS_BIAS: u32 = 0x3f80_0000;
 
 impl BuildPrim {
@@ -391,6 +394,7 @@ fn choose_split(
             scratch.right_count[i] = cnt;
         }
         let (mut acc, mut cnt) = (Box4::EMPTY, 0u32);
+        #[allow(clippy::needless_range_loop)] // bins i and i + 1 of two arrays
         for i in 0..k - 1 {
             acc = acc.union(&b[i].bounds);
             cnt += b[i].count;

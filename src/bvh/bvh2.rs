@@ -1,7 +1,7 @@
 //! The binary BVH and its scalar traversal: the reference every faster kernel is tested
 //! against. Simple on purpose: one box test per node, near child first, a fixed stack.
 
-use crate::bvh::MAX_DEPTH;
+use crate::bvh::limits::MAX_DEPTH;
 use crate::math::{Aabb, Vec3};
 use crate::ray::{Hit, Ray};
 
@@ -57,6 +57,11 @@ impl Bvh2 {
     /// True when the tree holds no primitives.
     pub fn is_empty(&self) -> bool {
         self.prim_ids.is_empty()
+    }
+
+    /// Bytes of nodes and primitive ids.
+    pub fn bytes(&self) -> usize {
+        std::mem::size_of_val(self.nodes.as_slice()) + std::mem::size_of_val(self.prim_ids.as_slice())
     }
 
     /// Closest hit. `test(prim, tfar)` intersects one primitive over `(ray.tnear, tfar]` and

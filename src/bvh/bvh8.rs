@@ -5,22 +5,11 @@ use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
 use crate::geometry::{Sphere4, Tri8, TriBlock, TriangleTest};
 
 /// The triangle block the scene uses: M = 8.
-// Measured on the Stanford dragon (871k triangles, 1024 x 768, 1 thread, best of 7, Mrays/s,
-// both built from the same binary BVH with the default collapse costs at the time):
-//
-// | rays | kernel | M = 4 | M = 8 |
-// |---|---|---|---|
-// | camera | single ray | 16.56 | 18.62 |
-// | camera | 16-ray packets | 31.22 | 33.76 |
-// | diffuse | single ray | 2.77 | 3.13 |
-// | diffuse | 16-ray packets | 3.16 | 3.53 |
-// | shadow | single ray | 3.53 | 4.07 |
-// | shadow | 16-ray packets | 8.48 | 9.38 |
-//
-// M = 8 tests one ray against a whole leaf with one AVX2 register operation where M = 4
-// needs two for leaves of 5 to 8 triangles, and halves the leaf count; it fills blocks less
-// well (66% against 71% of lanes), which the collapse costs keep in check
-// ([`crate::bvh::CollapseOptions`]).
+///
+/// M = 8 tests one ray against a whole leaf with one AVX2 register operation where M = 4
+/// needs two for leaves of 5 to 8 triangles, and halves the leaf count; it fills blocks less
+/// well, which the collapse costs keep in check ([`crate::bvh::CollapseOptions`]). It is the
+/// faster of the two on every ray set measured (PERFORMANCE.md, "Leaf block width").
 pub type DefaultTriBlock = Tri8;
 
 /// An 8-wide BVH with leaf blocks of `T`. `nodes[0]` is the root (always an inner node; an
@@ -52,8 +41,6 @@ impl<T: TriBlock> Default for Bvh8<T> {
 /// A [`Bvh8`]'s arrays as plain slices: what the traversal kernels read. (A [`BvhArray`] may
 /// be a section of a memory-mapped file, whose dereference costs a match and a cast: done once
 /// per query here instead of once per node.)
-// (The per-node dereference measured at 20% of the single-ray kernel's instructions on the
-// CS184 beetle's diffuse rays.)
 #[derive(Clone, Copy, Debug)]
 pub struct Bvh8Ref<'a, T> {
     /// Inner nodes; `nodes[0]` is the root.

@@ -15,12 +15,12 @@
 //! Binary leaves are atomic (never split), so leaves hold at most `max(binary leaf size,
 //! max_leaf_prims)` primitives. A binary leaf holding both triangles and spheres is split by
 //! kind into two leaves first (their padded boxes stay inside the parent's, because
-//! [`pad_outward`] is monotone); the scene's builder makes no such leaves. The greedy alternative (repeatedly open the child of largest
-//! area, as Embree's BVH8 builder does) is kept for comparison: on the Stanford dragon
-//! (871k triangles, M = 4, 1 thread, best of 7, Mrays/s, single-ray kernel) it gives SAH cost
-//! 17.4 against 16.0, 46% against 71% of block lanes used, 130 against 71 bytes per triangle,
-//! and 7.6 / 1.7 / 2.4 against 9.0 / 2.2 / 3.0 on camera / diffuse / shadow rays. The dynamic
-//! program takes 0.24 s on that mesh (one thread).
+//! [`pad_outward`] is monotone); the scene's builder makes no such leaves. The greedy
+//! alternative (repeatedly open the child of largest area, as Embree's BVH8 builder does) is
+//! kept for comparison ([`CollapseMethod::Greedy`]; PERFORMANCE.md, "Collapse").
+//!
+//! (A little past 600 lines: the dynamic program, its decisions' encoding and the emission of
+//! nodes and blocks that replays them are one algorithm.)
 
 use crate::bvh::build_sah::pad_outward;
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
@@ -51,14 +51,7 @@ pub enum CollapseMethod {
     Greedy,
 }
 
-/// Costs and limits of the collapse.
-///
-/// The defaults were measured on the Stanford dragon (871k triangles, M = 8, 1 thread, best
-/// of 9, Mrays/s for 16-ray packets on camera / diffuse / shadow rays, interleaved in one
-/// process): `block_cost` 1.0 and at most 8 primitives per merged leaf: 33.4 / 3.47 / 9.96 with
-/// 73 bytes per triangle; 0.7 and 16: 34.0 / 3.56 / 10.30 with 68 bytes per triangle; 0.5 and
-/// 24: no faster (33.98 / 3.04 / 7.89 against 33.84 / 3.06 / 7.79 in another run) at 63 bytes
-/// per triangle. Costs of 1.5 for blocks or for nodes were slower by 3 to 10%.
+/// Costs and limits of the collapse. The defaults are measured (PERFORMANCE.md, "Collapse").
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CollapseOptions {
     /// Which algorithm.
@@ -69,10 +62,7 @@ pub struct CollapseOptions {
     pub block_cost: f32,
     /// Additional cost per primitive of a leaf: packets test a leaf triangle by triangle
     /// (all rays against one), so their leaf cost grows with the primitive count, not the
-    /// block count. 0 by default: 0.05 and 0.15 sped 16-ray packets up on the CS184 CBbunny
-    /// (camera rays 65.3 / 69.0 against 61.3 Mrays/s) but slowed them down on the Stanford
-    /// dragon (36.3 / 30.1 against 37.9; 73 / 97 MB against 59 MB), and the frustum culling of
-    /// leaf triangles in the packet kernels now removes most of the CBbunny gap.
+    /// block count. 0 by default (PERFORMANCE.md, "Collapse").
     pub prim_cost: f32,
     /// Largest number of primitives the collapse may merge into one leaf (binary leaves
     /// larger than this stay as they are).

@@ -15,6 +15,7 @@ pub mod bvh8;
 pub mod collapse;
 pub mod counters;
 pub mod frustum;
+pub mod limits;
 pub mod node;
 pub mod queries;
 pub mod stats;
@@ -28,12 +29,6 @@ pub use bvh2::{Bvh2, Bvh2Node};
 pub use bvh8::{Bvh8, Bvh8Stats, DefaultTriBlock};
 pub use collapse::{CollapseMethod, CollapseOptions, PrimShape, collapse, collapse_for};
 pub use counters::{Counter, NoCount, TraversalCounts, Work};
+pub use limits::{BVH8_STACK, MAX_DEPTH};
 pub use node::{Bvh8Node, LeafKind, NodeRef};
 pub use stats::BvhStats;
-
-/// No tree built here is deeper than this (the builder switches to median splits before
-/// reaching it), so fixed-size traversal stacks of `MAX_DEPTH` entries cannot overflow.
-pub const MAX_DEPTH: usize = 96;
-
-/// Entries of a BVH8 traversal stack: each level pushes at most 7 siblings.
-pub const BVH8_STACK: usize = 7 * MAX_DEPTH + 8;

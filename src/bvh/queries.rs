@@ -21,10 +21,8 @@ use crate::simd::isa::{IsaOp, dispatch};
 use crate::simd::{Isa, IsaLanes, Lanes};
 
 /// A packet finishes a subtree as single rays once this many or fewer of its rays still
-/// want it (Embree's hybrid switch threshold).
-// Measured on the Stanford dragon (871k triangles, 1024 x 768, 1 thread, best of 7, Mrays/s),
-// closest hit with 16-ray packets: threshold 0 / 1 / 3 = 29.1 / 32.5 / 29.2 on camera rays,
-// 2.85 / 2.84 / 2.91 on diffuse bounces; any hit (shadow rays): 7.18 / 8.27 / 7.79 (at 2).
+/// want it (Embree's hybrid switch threshold; the value is measured, PERFORMANCE.md,
+/// "Hybrid threshold").
 pub const HYBRID_THRESHOLD: usize = 1;
 
 /// Runs `$body` with the type `$p` set to the triangle kernel of `$test`.

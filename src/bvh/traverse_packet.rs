@@ -481,10 +481,11 @@ fn lanes_to_test<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
 ) -> u32 {
     let lanes = leaf.lanes_of_block(k, T::M);
     let mut todo = (1u32 << lanes) - 1;
-    if TRIANGLE_CULL && lanes >= 4 {
-        if let Some(f) = fr {
-            todo &= f.intersect_triangles::<T, T::Lanes<I>>(block, P::TEST);
-        }
+    if TRIANGLE_CULL
+        && lanes >= 4
+        && let Some(f) = fr
+    {
+        todo &= f.intersect_triangles::<T, T::Lanes<I>>(block, P::TEST);
     }
     counter.add(Work::PacketTriangles, todo.count_ones());
     todo

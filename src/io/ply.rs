@@ -11,6 +11,9 @@
 //! per-vertex or per-face allocation, no quadratic step), and the header's element counts are
 //! checked against the bytes that follow before anything is allocated, so a 1 kB file
 //! claiming 4e9 vertices fails at once with an error instead of reserving gigabytes.
+//!
+//! (One file past 600 lines: the header parser and the readers of the three body encodings
+//! share one property model and its bounds checks, so they read best together.)
 
 use crate::io::LoadError;
 use crate::math::Vec3;

@@ -1,6 +1,8 @@
 //! Render statistics: rays by kind, a sparse sample of them, and CS184's "intersection tests
-//! per ray" measured on that sample with the reference traversal.
+//! per ray" measured on that sample by the traversal kernels' own counters
+//! ([`crate::bvh::counters`]), so the figure counts the very kernel that traces.
 
+use crate::bvh::TraversalCounts;
 use crate::ray::Ray;
 use crate::scene::Scene;
 
@@ -122,11 +124,11 @@ impl RayLog {
     }
 }
 
-/// Mean primitive intersection tests per ray of `kind` over `rays`, with the scalar reference
-/// traversal of the binary BVH (closest hit for camera and bounce rays, any hit for shadow
-/// rays) — or, when the build did not keep it, a scalar near-to-far walk of the 8-wide BVH
-/// counting the primitives of each leaf it opens — or the primitive count with brute force.
-/// `None` without rays.
+/// Mean intersection tests per ray of `kind` over `rays`, counted by the 8-wide BVH kernels
+/// themselves ([`Scene::intersect1_counted`] for camera and bounce rays,
+/// [`Scene::occluded1_counted`] for shadow rays): node tests (each one ray against 8 boxes)
+/// plus primitive-block tests, [`TraversalCounts::tests`]. With brute force every primitive is
+/// one test. `None` without rays.
 pub fn tests_per_ray(scene: &Scene, rays: &[Ray], kind: RayKind, brute_force: bool) -> Option<f64> {
     if rays.is_empty() {
         return None;
@@ -134,78 +136,59 @@ pub fn tests_per_ray(scene: &Scene, rays: &[Ray], kind: RayKind, brute_force: bo
     if brute_force {
         return Some(scene.num_prims() as f64);
     }
-    let Some(bvh2) = scene.bvh2() else {
-        let tests: u64 = rays.iter().map(|r| bvh8_tests(scene, r, kind == RayKind::Shadow)).sum();
-        return Some(tests as f64 / rays.len() as f64);
-    };
-    let mut tests = 0u64;
+    let mut counts = TraversalCounts::default();
     for ray in rays {
         match kind {
             RayKind::Shadow => {
-                bvh2.occluded(ray, |prim| {
-                    tests += 1;
-                    scene.intersect_prim(prim, ray, ray.tfar).is_some()
-                });
+                scene.occluded1_counted(ray, &mut counts);
             }
-            _ => {
-                bvh2.intersect(ray, |prim, tfar| {
-                    tests += 1;
-                    scene.intersect_prim(prim, ray, tfar)
-                });
+            RayKind::Camera | RayKind::Bounce => {
+                scene.intersect1_counted(ray, &mut counts);
             }
         }
     }
-    Some(tests as f64 / rays.len() as f64)
+    Some(counts.tests() as f64 / rays.len() as f64)
 }
 
-/// Primitives tested by a scalar walk of the scene's 8-wide BVH (children visited near to
-/// far, boxes re-tested against the shrinking `tfar`); stops at the first hit for `any_hit`.
-fn bvh8_tests(scene: &Scene, ray: &Ray, any_hit: bool) -> u64 {
-    use crate::bvh::LeafKind;
-    use crate::bvh::bvh2::slab_test;
-    let bvh = scene.bvh8();
-    if !ray.is_valid() {
-        return 0;
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::BuildOptions;
+    use crate::generate::grid;
+    use crate::math::Vec3;
+    use crate::scene::{Material, SceneBuilder};
+
+    /// A 32 × 32 grid of 2048 triangles in the unit square of the z = 0 plane.
+    fn grid_scene() -> Scene {
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::default());
+        let g = grid(32, 32);
+        b.add_mesh(&g.positions, &g.indices, m).unwrap();
+        b.commit(&BuildOptions::default()).0
     }
-    let inv = ray.inv_dir();
-    let (mut tfar, mut tests) = (ray.tfar, 0u64);
-    let mut stack = vec![(0usize, None)];
-    while let Some((node, leaf)) = stack.pop() {
-        if let Some(r) = leaf {
-            let r: crate::bvh::NodeRef = r;
-            for k in 0..r.block_count() {
-                let b = r.first_block() + k;
-                let prims: &[u32] = match r.kind() {
-                    LeafKind::Triangles => &bvh.tris[b].prim,
-                    LeafKind::Spheres => &bvh.spheres[b].prim,
-                };
-                let lanes = r.lanes_of_block(k, prims.len());
-                for &prim in &prims[..lanes] {
-                    tests += 1;
-                    if let Some((t, _, _)) = scene.intersect_prim(prim, ray, tfar) {
-                        if any_hit {
-                            return tests;
-                        }
-                        tfar = t;
-                    }
-                }
-            }
-            continue;
+
+    #[test]
+    fn tests_per_ray_counts_the_kernels_work() {
+        let scene = grid_scene();
+        let b = scene.bounds();
+        let over = |x: f32, y: f32, dir: Vec3| Ray::new(Vec3::new(x, y, b.max.z + 1.0), dir);
+        let xy =
+            |i: usize| (b.min.x + (b.max.x - b.min.x) * (i as f32 + 0.5) / 64.0, b.min.y + 0.37 * (b.max.y - b.min.y));
+        // Pointing away from the plane: the root's eight boxes are tested once, nothing else.
+        let away: Vec<Ray> = (0..64).map(|i| over(xy(i).0, xy(i).1, Vec3::Z)).collect();
+        for kind in RayKind::ALL {
+            assert_eq!(tests_per_ray(&scene, &away, kind, false), Some(1.0), "{kind:?}");
         }
-        let n = &bvh.nodes[node];
-        // Children hit, far to near, so that the nearest is popped first.
-        let (mut hits, mut count) = ([(0.0f32, 0usize); 8], 0);
-        for k in (0..8).filter(|&k| !n.children[k].is_empty()) {
-            if let Some(t) = slab_test(&n.child_bounds(k), ray.origin, inv, ray.tnear, tfar) {
-                hits[count] = (t, k);
-                count += 1;
-            }
-        }
-        hits[..count].sort_by(|a, b| b.0.total_cmp(&a.0));
-        for &(_, k) in &hits[..count] {
-            let c = n.children[k];
-            stack.push(if c.is_leaf() { (0, Some(c)) } else { (c.node_index(), None) });
-        }
+        // Straight down onto the grid: every ray hits, through at least the root and a block.
+        let down: Vec<Ray> = (0..64).map(|i| over(xy(i).0, xy(i).1, -Vec3::Z)).collect();
+        assert!(down.iter().all(|r| scene.intersect1(r).is_hit()));
+        let closest = tests_per_ray(&scene, &down, RayKind::Camera, false).unwrap();
+        let any = tests_per_ray(&scene, &down, RayKind::Shadow, false).unwrap();
+        assert!(closest >= 2.0 && any >= 2.0, "{closest} {any}");
+        // The any-hit kernel stops at its first hit, so it never does more than the closest-hit one.
+        assert!(any <= closest, "{any} > {closest}");
+        assert_eq!(tests_per_ray(&scene, &down, RayKind::Bounce, false), Some(closest));
+        assert_eq!(tests_per_ray(&scene, &down, RayKind::Camera, true), Some(2048.0));
+        assert_eq!(tests_per_ray(&scene, &[], RayKind::Camera, false), None);
     }
-    tests
 }

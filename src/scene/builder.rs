@@ -128,10 +128,10 @@ impl SceneBuilder {
         material: MaterialId,
     ) -> Result<(), SceneError> {
         self.check_material(material)?;
-        if let Some(n) = normals {
-            if n.len() != positions.len() {
-                return Err(SceneError::NormalCount { normals: n.len(), vertices: positions.len() });
-            }
+        if let Some(n) = normals
+            && n.len() != positions.len()
+        {
+            return Err(SceneError::NormalCount { normals: n.len(), vertices: positions.len() });
         }
         for (t, tri) in indices.iter().enumerate() {
             if let Some(&index) = tri.iter().find(|&&i| i as usize >= positions.len()) {
@@ -226,6 +226,14 @@ impl SceneBuilder {
     pub fn commit(self, opts: &BuildOptions) -> (Scene, CommitReport) {
         let (kept, report) = self.filter();
         (kept.build(opts), report)
+    }
+
+    /// The triangles [`SceneBuilder::commit`] keeps, and how many spheres it keeps, without
+    /// building anything: what another tracer builds over to compare with raypack (as
+    /// `raypack info --against embree` does with Embree).
+    pub fn into_kept_triangles(self) -> (TrianglesSoa, usize) {
+        let (kept, _) = self.filter();
+        (kept.triangles, kept.spheres.len())
     }
 
     /// The first half of [`SceneBuilder::commit`]: drops the primitives that cannot be traced.

@@ -6,12 +6,10 @@
 //! (camera and shadow rays), per-lane box tests always, and single-ray traversal for subtrees
 //! that only a few of the rays want (incoherent rays).
 //!
-//! Streams therefore trace every batch as 16-ray packets: choosing single rays for incoherent
-//! batches was measured and lost (1 thread, best of 7, Mrays/s, diffuse bounces: Stanford
-//! dragon 3.17 with packets against 2.58 ray by ray, CS184 CBbunny 14.3 against 10.5, beetle
-//! 12.3 against 8.4), and so did tiles of 4 packets under one frustum (see
-//! [`crate::bvh::traverse_packet`]). Shadow-ray streams also carry an [`OccluderCache`](crate::bvh::traverse_packet::OccluderCache) from
-//! packet to packet.
+//! Streams therefore trace every batch as 16-ray packets, coherent or not (single rays for
+//! incoherent batches, and tiles of 4 packets under one frustum, were slower: PERFORMANCE.md,
+//! "Streams"). Shadow-ray streams also carry an
+//! [`OccluderCache`](crate::bvh::traverse_packet::OccluderCache) from packet to packet.
 
 use crate::bvh::{Counter, NoCount};
 use crate::ray::{Hit, Ray, RayPacket8, RayPacket16};

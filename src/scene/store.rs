@@ -289,11 +289,11 @@ impl Scene {
         }
         let mut tfar = ray.tfar;
         for prim in 0..self.num_prims() as u32 {
-            if let Some((t, u, v)) = self.intersect_prim(prim, ray, tfar) {
-                if t < tfar || !hit.is_hit() {
-                    tfar = t;
-                    hit = Hit { t, u, v, prim };
-                }
+            if let Some((t, u, v)) = self.intersect_prim(prim, ray, tfar)
+                && (t < tfar || !hit.is_hit())
+            {
+                tfar = t;
+                hit = Hit { t, u, v, prim };
             }
         }
         hit

@@ -15,7 +15,7 @@
 //!
 //! The baseline uses the `wide` crate, which compiles for the build's own target features
 //! (SSE2 by default, NEON on AArch64); the higher tiers wrap `core::arch` intrinsics
-//! (`x86.rs`), because `wide` picks its implementation when it is compiled, not at run time.
+//! (module `x86`), because `wide` picks its implementation when it is compiled, not at run time.
 //!
 //! Masks follow `wide`'s convention: a lane is "true" when all its bits are one (the result
 //! of a comparison), "false" when all are zero. Comparisons are IEEE ordered: any NaN operand

@@ -3,7 +3,7 @@
 
 use raypack::generate::Mesh;
 use raypack::kernels::{KERNELS, Kernel, Results};
-use raypack::render::sampler::Rng;
+use raypack::rng::Rng;
 use raypack::{BuildOptions, Isa, Material, Ray, Scene, SceneBuilder, Vec3};
 use std::path::PathBuf;
 

@@ -2,11 +2,13 @@
 //! tree statistics per build quality, bytes per triangle of the scene store and of the
 //! acceleration structures, and the peak resident memory of the process.
 
-use crate::bvh::{BuildOptions, BuildQuality, Bvh2, Bvh8Stats, BvhStats};
-use crate::io::LoadError;
-use crate::math::Aabb;
-use crate::scene::{CommitReport, Scene, SceneBuilder, TrianglesSoa};
-use crate::simd::Isa;
+use crate::{CliError, InfoArgs, print_warnings};
+use raypack::bvh::{BuildOptions, BuildQuality, Bvh8Stats, BvhStats};
+use raypack::io::LoadError;
+use raypack::math::Aabb;
+use raypack::memory::{PeakResident, peak_resident_bytes, store_bytes};
+use raypack::scene::{CommitReport, SceneBuilder, TrianglesSoa};
+use raypack::simd::Isa;
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -17,7 +19,7 @@ pub struct InfoOptions {
     /// Build qualities to time, in order.
     pub qualities: Vec<BuildQuality>,
     /// The loader's limits.
-    pub load: crate::io::LoadOptions,
+    pub load: raypack::io::LoadOptions,
     /// Commit through the BVH cache in this directory ([`SceneBuilder::commit_cached`]).
     pub cache_dir: Option<PathBuf>,
     /// Check the structural invariants of both BVHs after each build.
@@ -42,7 +44,7 @@ impl Default for InfoOptions {
     fn default() -> Self {
         Self {
             qualities: vec![BuildQuality::Fast, BuildQuality::Medium, BuildQuality::High],
-            load: crate::io::LoadOptions::default(),
+            load: raypack::io::LoadOptions::default(),
             cache_dir: None,
             validate: false,
             keep_bvh2: false,
@@ -73,7 +75,7 @@ pub struct BuildInfo {
     pub bvh2_bytes: usize,
     /// The result of `--validate`: `None` when not asked for.
     pub valid: Option<Result<(), String>>,
-    /// Peak resident memory the commit added to the process (see [`BuildPeak`]).
+    /// Peak resident memory the commit added to the process (see [`PeakResident`]).
     pub peak_added_bytes: Option<u64>,
 }
 
@@ -86,29 +88,8 @@ pub struct EmbreeBuildInfo {
     pub seconds: f64,
     /// Bytes Embree holds for the BVH after the commit.
     pub bytes: u64,
-    /// Peak resident memory the commit added to the process (see [`BuildPeak`]).
+    /// Peak resident memory the commit added to the process (see [`PeakResident`]).
     pub peak_added_bytes: Option<u64>,
-}
-
-/// Measures how much a step raises the process's peak resident memory: resets the kernel's
-/// high-water mark (`/proc/self/clear_refs`, Linux ≥ 4.0) and remembers the resident size;
-/// [`BuildPeak::added`] then gives the new high-water mark minus that size, i.e. the peak
-/// memory of the step, temporaries included. `None` where Linux's files are missing.
-pub struct BuildPeak {
-    resident_before: Option<u64>,
-}
-
-impl BuildPeak {
-    /// Starts a measurement.
-    pub fn start() -> Self {
-        let reset = std::fs::write("/proc/self/clear_refs", "5").is_ok();
-        Self { resident_before: if reset { proc_status_kib("VmRSS:").map(|k| k * 1024) } else { None } }
-    }
-
-    /// Peak bytes added since [`BuildPeak::start`].
-    pub fn added(&self) -> Option<u64> {
-        Some(peak_resident_bytes()?.saturating_sub(self.resident_before?))
-    }
 }
 
 /// Everything `raypack info` prints.
@@ -145,37 +126,6 @@ pub struct SceneInfo {
     pub peak_resident_bytes: Option<u64>,
 }
 
-/// Bytes of a committed scene's geometry store (materials, lights and camera excluded).
-pub fn store_bytes(scene: &Scene) -> usize {
-    let t = &scene.triangles;
-    let s = &scene.spheres;
-    std::mem::size_of_val(t.positions.as_slice())
-        + std::mem::size_of_val(t.normals.as_slice())
-        + std::mem::size_of_val(t.indices.as_slice())
-        + std::mem::size_of_val(t.material.as_slice())
-        + std::mem::size_of_val(s.center.as_slice())
-        + std::mem::size_of_val(s.radius.as_slice())
-        + std::mem::size_of_val(s.material.as_slice())
-}
-
-/// Bytes of a binary BVH.
-pub fn bvh2_bytes(bvh: &Bvh2) -> usize {
-    std::mem::size_of_val(bvh.nodes.as_slice()) + std::mem::size_of_val(bvh.prim_ids.as_slice())
-}
-
-/// Peak resident set size of this process (`VmHWM` of `/proc/self/status`). Linux only:
-/// `None` elsewhere or when the file cannot be read.
-pub fn peak_resident_bytes() -> Option<u64> {
-    Some(proc_status_kib("VmHWM:")? * 1024)
-}
-
-/// A `kB` field of `/proc/self/status`.
-fn proc_status_kib(field: &str) -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with(field))?;
-    line[field.len()..].trim().trim_end_matches("kB").trim().parse().ok()
-}
-
 /// Why [`scene_info`] failed.
 #[derive(Debug, thiserror::Error)]
 pub enum InfoError {
@@ -192,11 +142,11 @@ pub enum InfoError {
 pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, InfoError> {
     if opts.against_embree && !cfg!(feature = "embree") {
         return Err(InfoError::Embree(
-            "--against embree: this raypack was built without Embree; rebuild with `cargo build --release --features embree` (needs the system package libembree-dev)".into(),
+            "--against embree: this raypack was built without Embree; rebuild with `cargo build --release --features embree` (needs Embree 3 or 4: libembree-dev on Debian, or RAYPACK_EMBREE_DIR; see the README)".into(),
         ));
     }
     let t = Instant::now();
-    let (builder, warnings) = crate::io::load_scene_with_options(path, &opts.load)?;
+    let (builder, warnings) = raypack::io::load_scene_with_options(path, &opts.load)?;
     let load_seconds = t.elapsed().as_secs_f64();
     let mut info = SceneInfo {
         path: path.to_path_buf(),
@@ -215,15 +165,15 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, InfoErro
         peak_resident_bytes: None,
     };
     if opts.against_embree && opts.embree_first {
-        let (kept, _) = builder.clone().filter();
-        info.embree_builds = embree_builds(&kept.triangles, kept.spheres.len(), opts.isa)?;
+        let (triangles, spheres) = builder.clone().into_kept_triangles();
+        info.embree_builds = embree_builds(&triangles, spheres, opts.isa)?;
     }
     let mut builder = Some(builder);
     for (i, &quality) in opts.qualities.iter().enumerate() {
         let last = i + 1 == opts.qualities.len();
         let b: SceneBuilder = if last { builder.take().expect("builder") } else { builder.clone().expect("builder") };
         let build_opts = BuildOptions { quality, keep_bvh2: opts.keep_bvh2, ..BuildOptions::default() };
-        let peak = BuildPeak::start();
+        let peak = PeakResident::start();
         let t = Instant::now();
         let (scene, report, cache) = match &opts.cache_dir {
             Some(dir) => {
@@ -247,9 +197,9 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, InfoErro
             let bounds: Vec<_> = (0..scene.num_prims() as u32).map(|p| scene.prim_bounds(p)).collect();
             scene
                 .bvh2()
-                .map_or(Ok(()), |b| crate::bvh::validate::validate_bvh2(b, &bounds))
+                .map_or(Ok(()), |b| raypack::bvh::validate::validate_bvh2(b, &bounds))
                 .map_err(|e| format!("binary BVH: {e}"))
-                .and_then(|()| crate::bvh::validate::validate_bvh8(scene.bvh8(), &bounds))
+                .and_then(|()| raypack::bvh::validate::validate_bvh8(scene.bvh8(), &bounds))
                 .map_err(|e| format!("8-wide BVH: {e}"))
         });
         info.builds.push(BuildInfo {
@@ -259,7 +209,7 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, InfoErro
             cache_warnings: cache.map(|c| c.warnings()).unwrap_or_default(),
             bvh2: scene.bvh_stats(),
             bvh8: scene.bvh8().stats(),
-            bvh2_bytes: scene.bvh2().map_or(0, bvh2_bytes),
+            bvh2_bytes: scene.bvh2().map_or(0, |b| b.bytes()),
             valid,
             peak_added_bytes,
         });
@@ -279,7 +229,7 @@ fn embree_builds(
     spheres: usize,
     isa: Option<Isa>,
 ) -> Result<Vec<EmbreeBuildInfo>, InfoError> {
-    use crate::embree::{EmbreeError, EmbreeOptions, EmbreeQuality, EmbreeScene};
+    use raypack::embree::{EmbreeError, EmbreeOptions, EmbreeQuality, EmbreeScene};
     if spheres > 0 {
         return Err(InfoError::Embree(EmbreeError::Spheres(spheres).to_string()));
     }
@@ -288,7 +238,7 @@ fn embree_builds(
     for quality in [EmbreeQuality::Medium, EmbreeQuality::High] {
         let options =
             EmbreeOptions { quality, threads: rayon::current_num_threads(), max_isa: isa, ..EmbreeOptions::default() };
-        let peak = BuildPeak::start();
+        let peak = PeakResident::start();
         let e = EmbreeScene::from_mesh(positions, indices, options).map_err(|e| InfoError::Embree(e.to_string()))?;
         out.push(EmbreeBuildInfo {
             quality: quality.name(),
@@ -462,19 +412,40 @@ impl SceneInfo {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn peak_memory_is_read_on_linux() {
-        let peak = peak_resident_bytes();
-        if cfg!(target_os = "linux") {
-            // At least the pages this vector touches.
-            let v = vec![1u8; 8 << 20];
-            assert!(peak_resident_bytes().unwrap() >= v.len() as u64 && v.iter().all(|&b| b == 1));
-        } else {
-            assert_eq!(peak, None);
-        }
+/// `raypack info`: the figures of [`scene_info`] as text or JSON.
+pub(crate) fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
+    if a.threads == Some(0) {
+        return Err(CliError::Usage("-t 0: need at least one thread".into()));
+    }
+    let mut opts = InfoOptions {
+        load: raypack::io::LoadOptions { max_primitives: a.max_primitives },
+        cache_dir: a.bvh_cache.clone(),
+        validate: a.validate,
+        keep_bvh2: a.keep_bvh2,
+        against_embree: a.against.is_some(),
+        embree_first: a.embree_first,
+        isa: a.isa,
+        ..InfoOptions::default()
+    };
+    if let Some(q) = a.quality {
+        opts.qualities = vec![q.into()];
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads.unwrap_or(0))
+        .build()
+        .map_err(|e| CliError::Usage(e.to_string()))?;
+    let info = pool.install(|| scene_info(&a.scene, &opts))?;
+    print_warnings(&info.warnings);
+    for w in info.builds.iter().flat_map(|b| &b.cache_warnings) {
+        eprintln!("[raypack] warning: {w}");
+    }
+    if a.json {
+        println!("{:#}", info.json());
+    } else {
+        print!("{}", info.text());
+    }
+    match info.builds.iter().find_map(|b| b.valid.as_ref().and_then(|v| v.as_ref().err())) {
+        Some(e) => Err(CliError::Usage(format!("BVH invalid: {e}"))),
+        None => Ok(()),
     }
 }

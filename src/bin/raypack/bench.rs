@@ -1,25 +1,21 @@
 //! `raypack bench`: times raypack's kernels (and, with `--against embree`, Embree's calls) on
-//! the standard ray sets of [`crate::raysets`], over one thread and all threads.
+//! the standard ray sets of [`raypack::raysets`], over one thread and all threads.
 //!
-//! Every method has the same contract: a slice of [`Ray`]s in, a slice of [`Hit`]s (or
-//! occlusion flags) out. Rays are spread over threads in contiguous chunks of whole 4×4
-//! tiles ([`CHUNK`] rays). Each method runs once to warm up and to validate its checksum
-//! against the reference, then `runs` times, round-robin with the other methods of the same
-//! ray set and thread count; the median time is reported.
-//!
-//! The raypack side is the kernel registry [`crate::kernels::KERNELS`], run on the scene's ISA
-//! tier (`--isa` lowers it, and limits Embree to the same tier).
+//! The methods and their tracing over threads are the library's ([`raypack::methods`]). Each
+//! method runs once to warm up and to validate its checksum against the reference, then
+//! `runs` times, round-robin with the other methods of the same ray set and thread count; the
+//! median time is reported. `--isa` lowers the scene's ISA tier and limits Embree to the same
+//! tier.
 
-use crate::kernels::{KERNELS, Query};
-use crate::ray::{Hit, Ray};
-use crate::raysets::{self, Checksum};
-use crate::scene::Scene;
-use crate::simd::Isa;
-use rayon::prelude::*;
+use crate::{BenchArgs, CliError, check_memory, load, print_warnings};
+#[cfg(feature = "embree")]
+use raypack::methods::embree_methods;
+use raypack::methods::{Method, output_for, raypack_methods, trace};
+use raypack::raysets::{self, Checksum};
+use raypack::{BuildOptions, BuildQuality};
+use raypack::{Isa, Scene};
+use std::path::Path;
 use std::time::{Duration, Instant};
-
-/// Rays per work item when tracing on several threads: 64 tiles of 4×4.
-pub const CHUNK: usize = 1024;
 
 /// Bytes of raypack's acceleration structure over `scene`: the BVH8 nodes and its leaf blocks
 /// (which hold their own copies of the triangles, as Embree's `Triangle4` leaves do), the
@@ -28,137 +24,21 @@ pub fn raypack_accel_bytes(scene: &Scene) -> usize {
     scene.bvh8().bytes()
 }
 
-/// A traceable method of either tracer, bound to its scene.
-pub struct Method<'a> {
-    /// `raypack` or `embree`.
-    pub tracer: &'static str,
-    /// Method name, e.g. `rtcIntersect16 coherent (high)`.
-    pub name: String,
-    /// What it runs.
-    pub run: Run<'a>,
-}
-
-/// A bound closest-hit or occlusion function.
-pub enum Run<'a> {
-    /// Closest hit of each ray.
-    Intersect(Box<dyn Fn(&[Ray], &mut [Hit]) + Sync + 'a>),
-    /// Occlusion of each ray.
-    Occluded(Box<dyn Fn(&[Ray], &mut [bool]) + Sync + 'a>),
-}
-
-impl Run<'_> {
-    /// True for occlusion queries.
-    pub fn is_occlusion(&self) -> bool {
-        matches!(self, Run::Occluded(_))
-    }
-}
-
-/// The kernels of [`crate::kernels::KERNELS`] bound to `scene` (on its ISA).
-pub fn raypack_methods(scene: &Scene) -> Vec<Method<'_>> {
-    KERNELS
-        .iter()
-        .map(|k| Method {
-            tracer: "raypack",
-            name: k.name.to_string(),
-            run: match k.query {
-                Query::Intersect(f) => Run::Intersect(Box::new(move |r, h| f(scene, r, h))),
-                Query::Occluded(f) => Run::Occluded(Box::new(move |r, o| f(scene, r, o))),
-            },
-        })
-        .collect()
-}
-
-/// Embree's calls on `e`: `rtcIntersect1/8/16`, `rtcOccluded1/8/16`, and the 8- and 16-wide
-/// packet calls again with `RTC_INTERSECT_CONTEXT_FLAG_COHERENT`. `suffix` (e.g. ` (high)`)
-/// is appended to every name.
-#[cfg(feature = "embree")]
-pub fn embree_methods<'a>(e: &'a crate::embree::EmbreeScene, suffix: &str) -> Vec<Method<'a>> {
-    use crate::embree::EmbreeWidth::{W1, W8, W16};
-    let mut out = Vec::new();
-    for (width, coherent) in [(W1, false), (W8, false), (W16, false), (W8, true), (W16, true)] {
-        let tag = if coherent { " coherent" } else { "" };
-        let lanes = width.lanes();
-        out.push(Method {
-            tracer: "embree",
-            name: format!("rtcIntersect{lanes}{tag}{suffix}"),
-            run: Run::Intersect(Box::new(move |r, h| e.intersect(width, coherent, r, h))),
-        });
-        out.push(Method {
-            tracer: "embree",
-            name: format!("rtcOccluded{lanes}{tag}{suffix}"),
-            run: Run::Occluded(Box::new(move |r, o| e.occluded(width, coherent, r, o))),
-        });
-    }
-    out
-}
-
-/// The results of one method on one ray set.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Output {
-    /// Closest hits.
-    Hits(Vec<Hit>),
-    /// Occlusion flags.
-    Occluded(Vec<bool>),
-}
-
-impl Output {
-    /// The checksum of these results for `rays`.
-    pub fn checksum(&self, rays: &[Ray]) -> Checksum {
-        match self {
-            Output::Hits(h) => Checksum::of_hits(h),
-            Output::Occluded(o) => Checksum::of_occlusion(rays, o),
-        }
-    }
-}
-
-/// An output buffer of the right kind for `run`.
-pub fn output_for(run: &Run<'_>, n: usize) -> Output {
-    match run {
-        Run::Intersect(_) => Output::Hits(vec![Hit::MISS; n]),
-        Run::Occluded(_) => Output::Occluded(vec![false; n]),
-    }
-}
-
-/// Traces `rays` with `run` into `out` on the current rayon pool, in contiguous chunks of
-/// [`CHUNK`] rays.
-///
-/// # Panics
-/// When `out` is of the other query kind or shorter than `rays`.
-pub fn trace(run: &Run<'_>, rays: &[Ray], out: &mut Output) {
-    match (run, out) {
-        (Run::Intersect(f), Output::Hits(h)) => {
-            rays.par_chunks(CHUNK).zip(h.par_chunks_mut(CHUNK)).for_each(|(r, h)| f(r, h))
-        }
-        (Run::Occluded(f), Output::Occluded(o)) => {
-            rays.par_chunks(CHUNK).zip(o.par_chunks_mut(CHUNK)).for_each(|(r, o)| f(r, o))
-        }
-        _ => panic!("output buffer does not match the query"),
-    }
-}
-
 /// Why `raypack bench` could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum BenchError {
     /// `--against embree` in a build without the `embree` feature.
     #[error(
-        "--against embree: this raypack was built without Embree; rebuild with `cargo build --release --features embree` (needs the system package libembree-dev)"
+        "--against embree: this raypack was built without Embree; rebuild with `cargo build --release --features embree` (needs Embree 3 or 4: libembree-dev on Debian, or RAYPACK_EMBREE_DIR; see the README)"
     )]
     EmbreeNotBuilt,
     /// Embree refused the scene.
     #[cfg(feature = "embree")]
     #[error("Embree: {0}")]
-    Embree(#[from] crate::embree::EmbreeError),
+    Embree(#[from] raypack::embree::EmbreeError),
     /// Bad settings.
     #[error("{0}")]
     Settings(String),
-    /// Writing the JSON report failed.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: std::path::PathBuf,
-        /// The underlying error.
-        source: std::io::Error,
-    },
 }
 
 /// What to run.
@@ -300,11 +180,11 @@ pub fn run_bench(
 
     #[cfg(feature = "embree")]
     let embree_scenes = if settings.against_embree {
-        use crate::embree::{EmbreeQuality, EmbreeScene, EmbreeWidth};
+        use raypack::embree::{EmbreeQuality, EmbreeScene, EmbreeWidth};
         let mut v = Vec::new();
         for q in [EmbreeQuality::Medium, EmbreeQuality::High] {
             log(&format!("building Embree BVH ({})", q.name()));
-            let options = crate::embree::EmbreeOptions { quality: q, max_isa: settings.isa, ..Default::default() };
+            let options = raypack::embree::EmbreeOptions { quality: q, max_isa: settings.isa, ..Default::default() };
             let e = EmbreeScene::with_options(scene, options)?;
             report.build.push(BuildFigures {
                 tracer: "embree",
@@ -518,16 +398,84 @@ impl BenchReport {
     }
 }
 
-/// Writes `text` to `path` atomically and safely ([`crate::io::output::write_file`]).
-pub fn write_atomically(path: &std::path::Path, text: &str) -> Result<(), BenchError> {
-    crate::io::output::write_file(path, text.as_bytes()).map_err(|e| BenchError::Io { path: e.path, source: e.source })
+/// `raypack bench`: checks the settings and the memory, builds the scene, runs [`run_bench`] and
+/// prints or writes the report.
+pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
+    use raypack::io::output::{OutputOptions, check_target, write_file_with};
+    let (width, height) = (a.resolution[0], a.resolution[1]);
+    if width == 0 || height == 0 || width > 1 << 15 || height > 1 << 15 {
+        return Err(CliError::Usage(format!("-r {width} {height}: width and height must be between 1 and 32768")));
+    }
+    if a.runs == 0 {
+        return Err(CliError::Usage("--runs 0: need at least one timed run".into()));
+    }
+    let settings = BenchSettings {
+        width,
+        height,
+        runs: a.runs,
+        against_embree: a.against.is_some(),
+        isa: a.isa,
+        methods: a.methods.clone(),
+        threads: if a.threads.is_empty() { vec![1, 0] } else { a.threads.clone() },
+        ..Default::default()
+    };
+    if settings.against_embree && !cfg!(feature = "embree") {
+        return Err(BenchError::EmbreeNotBuilt.into());
+    }
+    let json_opts = OutputOptions::protecting(&[&a.scene]);
+    if let Some(p) = a.json.as_deref().filter(|p| *p != Path::new("-")) {
+        check_target(p, &json_opts)?;
+    }
+    let per_ray = raypack::memory::BENCH_BYTES_PER_PIXEL;
+    check_memory(width, height, (width * height) as u64 * per_ray, per_ray)?;
+    let (builder, warnings) = load(Some(&a.scene), a.max_primitives)?;
+    print_warnings(&warnings);
+    let quality: BuildQuality = a.quality.into();
+    let t = Instant::now();
+    // The binary BVH stays for the reference rows and the checksums they anchor.
+    let opts = BuildOptions { quality, watertight: a.watertight, keep_bvh2: true, ..BuildOptions::default() };
+    let (mut scene, report) = match a.bvh_cache.as_deref() {
+        None => builder.commit(&opts),
+        Some(dir) => {
+            let (scene, report, cache) = builder.commit_cached(&opts, dir);
+            for w in cache.warnings() {
+                eprintln!("[raypack] warning: {w}");
+            }
+            if cache.loaded {
+                eprintln!("[raypack] BVH loaded from {} (the build time below is the load time)", cache.path.display());
+            }
+            (scene, report)
+        }
+    };
+    let seconds = t.elapsed().as_secs_f64();
+    if report.dropped() > 0 {
+        eprintln!("[raypack] warning: {report}");
+    }
+    let build = BuildFigures {
+        tracer: "raypack",
+        quality: format!("bvh8 {} {}", format!("{quality:?}").to_lowercase(), scene.triangle_test().name()),
+        seconds,
+        bytes: raypack_accel_bytes(&scene) as u64,
+    };
+    let name = a.scene.display().to_string();
+    let out = run_bench(&name, &mut scene, build, &settings, &mut |line| eprintln!("[raypack] {line}"))?;
+    match a.json.as_deref() {
+        Some(p) if p == Path::new("-") => println!("{:#}", out.json()),
+        Some(p) => {
+            write_file_with(p, format!("{:#}\n", out.json()).as_bytes(), &json_opts)?;
+            print!("{}", out.table());
+        }
+        None => print!("{}", out.table()),
+    }
+    Ok(())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::generate::uv_sphere;
-    use crate::{BuildOptions, Material, SceneBuilder};
+    use raypack::generate::uv_sphere;
+    use raypack::kernels::KERNELS;
+    use raypack::{BuildOptions, Material, SceneBuilder};
 
     #[test]
     fn bench_runs_every_kernel_and_checksums_agree() {
