@@ -160,6 +160,36 @@ struct RenderArgs {
     /// RAYPACK_ISA).
     #[arg(long, value_parser = parse_isa)]
     isa: Option<Isa>,
+    /// Order of the shadow-ray streams (default: the one measured fastest for the kernels).
+    #[arg(long, value_enum)]
+    shadow_order: Option<RayOrderArg>,
+    /// Order of the bounce-ray streams (default: the one measured fastest for the kernels).
+    #[arg(long, value_enum)]
+    bounce_order: Option<RayOrderArg>,
+}
+
+/// `--shadow-order` / `--bounce-order`: [`render::RayOrder`].
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum RayOrderArg {
+    /// As shaded.
+    Queued,
+    /// By direction octant.
+    Octant,
+    /// By octant, then origin along a Morton curve.
+    OctantMorton,
+    /// By origin along a Morton curve.
+    Morton,
+}
+
+impl From<RayOrderArg> for render::RayOrder {
+    fn from(a: RayOrderArg) -> Self {
+        match a {
+            RayOrderArg::Queued => render::RayOrder::Queued,
+            RayOrderArg::Octant => render::RayOrder::Octant,
+            RayOrderArg::OctantMorton => render::RayOrder::OctantMorton,
+            RayOrderArg::Morton => render::RayOrder::Morton,
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -371,6 +401,16 @@ fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             seed: a.seed,
             brute_force: a.brute_force,
             russian_roulette: !a.no_russian_roulette,
+            stream_order: match (a.shadow_order, a.bounce_order) {
+                (None, None) => None,
+                (shadow, bounce) => {
+                    let default = render::StreamOrder::default_for(scene.isa());
+                    Some(render::StreamOrder {
+                        shadow: shadow.map_or(default.shadow, Into::into),
+                        bounce: bounce.map_or(default.bounce, Into::into),
+                    })
+                }
+            },
         };
         let bar = progress_bar(width.div_ceil(render::TILE) * height.div_ceil(render::TILE));
         eprintln!(
@@ -427,14 +467,24 @@ fn report(scene: &Scene, settings: &RenderSettings, out: &render::RenderOutput, 
         eprintln!("[raypack] warning: {} samples were NaN or infinite and counted as black.", s.invalid_samples);
     }
     eprintln!(
-        "[raypack] Time: {} {:.4}s, {} {:.4}s, render {:.4}s (thread time: camera rays {:.4}s, shading {:.4}s).",
-        setup[0].0,
-        setup[0].1,
-        setup[1].0,
-        setup[1].1,
-        secs,
-        s.camera_time.as_secs_f64(),
-        s.shading_time.as_secs_f64()
+        "[raypack] Time: {} {:.4}s, {} {:.4}s, render {:.4}s.",
+        setup[0].0, setup[0].1, setup[1].0, setup[1].1, secs
+    );
+    let p = &s.phases;
+    let total = p.total().as_secs_f64().max(1e-9);
+    let phase = |name: &str, d: std::time::Duration| {
+        format!("{name} {:.4}s ({:.1}%)", d.as_secs_f64(), 100.0 * d.as_secs_f64() / total)
+    };
+    eprintln!(
+        "[raypack] Thread time by phase: {}, {}, {}, {}, {}, {}, {}, {}.",
+        phase("generate", p.generate),
+        phase("trace camera", p.trace[0]),
+        phase("trace shadow", p.trace[1]),
+        phase("trace bounce", p.trace[2]),
+        phase("shade", p.shade),
+        phase("sort", p.sort),
+        phase("compact", p.compact),
+        phase("film", p.film)
     );
 }
 

@@ -1,0 +1,230 @@
+//! Wavefront path tracing: a batch of paths advances together, one bounce at a time, and every
+//! ray of a bounce is traced in one stream through the packet kernels.
+//!
+//! A batch (the camera samples of one pass over a tile) goes through:
+//! 1. *generate*: the caller queues one camera ray per path ([`Wavefront::push_camera`]);
+//! 2. *trace*: the camera rays as one closest-hit stream;
+//! 3. *shade*: each hit adds its emission, queues its direct-lighting samples (shadow rays, or
+//!    hemisphere rays under `-H`), samples its BSDF and plays Russian roulette
+//!    ([`Integrator::shade`]), writing the continuation ray in place of the ray shaded;
+//! 4. *trace* the shadow rays of the whole batch as one occlusion stream (and the hemisphere
+//!    rays as one closest-hit stream), add each point's direct lighting
+//!    ([`Integrator::direct_total`]);
+//! 5. *compact* the surviving paths' rays, optionally *sort* them ([`RayOrder`]), trace them as
+//!    one closest-hit stream and go back to 3 until no path is left.
+//!
+//! A path's random numbers come from its own generator and are drawn in the same order
+//! whatever else is in the batch, and every ray gets the same answer from the stream kernels as
+//! alone, so the image does not depend on the batch, the order of the rays or the thread.
+
+use super::integrator::{Integrator, PathState};
+use super::order::{RayOrder, SortScratch};
+use super::queue::{DirectQueue, RayQueue};
+use super::sampler::Rng;
+use super::stats::{PhaseTimes, RayKind, RayLog};
+use crate::math::Vec3;
+use crate::ray::{Hit, Ray};
+use crate::scene::SurfaceHit;
+use std::time::{Duration, Instant};
+
+/// How secondary rays are ordered before each stream.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct StreamOrder {
+    /// Shadow rays.
+    pub shadow: RayOrder,
+    /// Continuation rays (and hemisphere rays).
+    pub bounce: RayOrder,
+}
+
+impl StreamOrder {
+    /// The order measured fastest on `isa`'s kernels.
+    pub fn default_for(_isa: crate::Isa) -> Self {
+        Self::default()
+    }
+}
+
+/// One worker's wavefront: the paths of a batch and its queues, reused from batch to batch.
+#[derive(Clone, Debug, Default)]
+pub struct Wavefront {
+    /// Paths of the batch, in camera-ray order.
+    paths: Vec<PathState>,
+    /// The rays of the current bounce, each owned by its path.
+    queue: RayQueue,
+    /// `alive[k]`: the path of `queue.rays[k]` goes on (its continuation replaced the ray).
+    alive: Vec<bool>,
+    /// `surfaces[k]`: the surface hit by `queue.rays[k]`, if any.
+    surfaces: Vec<SurfaceHit>,
+    /// Direct lighting of the current bounce.
+    direct: DirectQueue,
+    scratch: SortScratch,
+}
+
+impl Wavefront {
+    /// An empty wavefront.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Makes room for batches of `paths` paths.
+    pub fn reserve(&mut self, paths: usize) {
+        self.paths.reserve(paths.saturating_sub(self.paths.len()));
+        for v in [&mut self.queue, &mut self.direct.shadow, &mut self.direct.probes] {
+            v.rays.reserve(paths.saturating_sub(v.rays.len()));
+            v.owner.reserve(paths.saturating_sub(v.owner.len()));
+            v.hits.reserve(paths.saturating_sub(v.hits.len()));
+            v.occluded.reserve(paths.saturating_sub(v.occluded.len()));
+        }
+        self.alive.reserve(paths.saturating_sub(self.alive.len()));
+        self.direct.points.reserve(paths.saturating_sub(self.direct.points.len()));
+        self.direct.samples.reserve(paths.saturating_sub(self.direct.samples.len()));
+    }
+
+    /// Starts a new batch.
+    pub fn clear(&mut self) {
+        self.paths.clear();
+        self.queue.clear();
+    }
+
+    /// Number of paths in the batch.
+    pub fn len(&self) -> usize {
+        self.paths.len()
+    }
+
+    /// True when the batch has no path.
+    pub fn is_empty(&self) -> bool {
+        self.paths.is_empty()
+    }
+
+    /// Adds a path starting with camera ray `ray`, drawing from `rng`.
+    #[inline]
+    pub fn push_camera(&mut self, ray: Ray, rng: Rng) {
+        self.queue.push(ray, self.paths.len() as u32);
+        self.paths.push(PathState::new(rng));
+    }
+
+    /// The radiance each path of the batch brought back, in the order they were pushed.
+    pub fn radiance(&self) -> impl Iterator<Item = Vec3> + '_ {
+        self.paths.iter().map(|p| p.l)
+    }
+
+    /// Traces the batch to the end of its last path, logging the rays in `log` and the time
+    /// of each phase in `times`.
+    pub fn run(&mut self, integrator: &Integrator, order: StreamOrder, log: &mut RayLog, times: &mut PhaseTimes) {
+        let tracer = integrator.tracer();
+        let bounds = tracer.scene().bounds();
+        let mut clock = Clock::start();
+        let q = &mut self.queue;
+        resize(&mut q.hits, q.rays.len(), Hit::MISS);
+        tracer.closest_batch(&q.rays, &mut q.hits);
+        clock.lap(&mut times.trace[RayKind::Camera as usize]);
+        if !integrator.traces_paths() {
+            for (k, &id) in q.owner.iter().enumerate() {
+                self.paths[id as usize].l = integrator.camera_only(&q.rays[k], &q.hits[k]);
+            }
+            clock.lap(&mut times.shade);
+            return;
+        }
+        loop {
+            // Shade: each surviving path's continuation replaces its ray.
+            let (q, d) = (&mut self.queue, &mut self.direct);
+            d.clear();
+            self.alive.clear();
+            let scene = tracer.scene();
+            resize(&mut self.surfaces, q.rays.len(), MISSED);
+            for ((s, ray), hit) in self.surfaces.iter_mut().zip(&q.rays).zip(&q.hits) {
+                if hit.is_hit() {
+                    *s = scene.surface(ray, hit);
+                }
+            }
+            for k in 0..q.rays.len() {
+                let id = q.owner[k];
+                let next =
+                    integrator.shade(&mut self.paths[id as usize], &q.rays[k], &q.hits[k], &self.surfaces[k], d, id);
+                if let Some(next) = next {
+                    q.rays[k] = next;
+                }
+                self.alive.push(next.is_some());
+            }
+            clock.lap(&mut times.shade);
+
+            // Direct lighting: the shadow rays as one occlusion stream, the hemisphere rays as
+            // one closest-hit stream.
+            let s = &mut d.shadow;
+            if !s.is_empty() {
+                log_rays(log, RayKind::Shadow, &s.rays);
+                s.sort(order.shadow, &bounds, &mut self.scratch);
+                clock.lap(&mut times.sort);
+                resize(&mut s.occluded, s.rays.len(), false);
+                tracer.occluded_batch(&s.rays, &mut s.occluded);
+                clock.lap(&mut times.trace[RayKind::Shadow as usize]);
+                for (&blocked, &i) in s.occluded.iter().zip(&s.owner) {
+                    d.samples[i as usize].visible = !blocked;
+                }
+            }
+            let p = &mut d.probes;
+            if !p.is_empty() {
+                log_rays(log, RayKind::Bounce, &p.rays);
+                p.sort(order.bounce, &bounds, &mut self.scratch);
+                clock.lap(&mut times.sort);
+                resize(&mut p.hits, p.rays.len(), Hit::MISS);
+                tracer.closest_batch(&p.rays, &mut p.hits);
+                clock.lap(&mut times.trace[RayKind::Bounce as usize]);
+                for ((ray, hit), &i) in p.rays.iter().zip(&p.hits).zip(&p.owner) {
+                    d.samples[i as usize].radiance = integrator.probe_radiance(hit, ray.dir);
+                }
+            }
+            for (i, point) in d.points.iter().enumerate() {
+                let path = &mut self.paths[point.path as usize];
+                path.l += point.weight * integrator.direct_total(d.samples_of(i));
+            }
+            clock.lap(&mut times.shade);
+
+            // Compact the survivors, order and trace their continuations.
+            q.retain(&self.alive);
+            clock.lap(&mut times.compact);
+            if q.is_empty() {
+                return;
+            }
+            log_rays(log, RayKind::Bounce, &q.rays);
+            q.sort(order.bounce, &bounds, &mut self.scratch);
+            clock.lap(&mut times.sort);
+            resize(&mut q.hits, q.rays.len(), Hit::MISS);
+            tracer.closest_batch(&q.rays, &mut q.hits);
+            clock.lap(&mut times.trace[RayKind::Bounce as usize]);
+        }
+    }
+}
+
+/// What stands in `surfaces` for a ray that hit nothing.
+const MISSED: SurfaceHit =
+    SurfaceHit { position: Vec3::ZERO, geometric_normal: Vec3::Z, shading_normal: Vec3::Z, material: 0 };
+
+/// Splits elapsed time into phases.
+struct Clock(Instant);
+
+impl Clock {
+    fn start() -> Self {
+        Self(Instant::now())
+    }
+
+    /// Adds the time since the last lap to `phase`.
+    #[inline]
+    fn lap(&mut self, phase: &mut Duration) {
+        let now = Instant::now();
+        *phase += now - self.0;
+        self.0 = now;
+    }
+}
+
+fn log_rays(log: &mut RayLog, kind: RayKind, rays: &[Ray]) {
+    for r in rays {
+        log.record(kind, r);
+    }
+}
+
+/// `v` with exactly `n` elements, all `fill`, keeping its capacity.
+#[inline]
+fn resize<T: Clone>(v: &mut Vec<T>, n: usize, fill: T) {
+    v.clear();
+    v.resize(n, fill);
+}
