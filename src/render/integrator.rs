@@ -76,6 +76,16 @@ const ROULETTE_START: u32 = 2;
 /// are the lights' indices.
 pub const HEMISPHERE: u32 = u32::MAX;
 
+/// Where a path scatters at a surface: the shading frame there and the direction toward
+/// where the path came from, in that frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Scatter {
+    /// Shading frame (`z`: the shading normal).
+    pub frame: Frame,
+    /// Unit direction back along the incoming ray, local to `frame`.
+    pub wo: Vec3,
+}
+
 /// A path between two bounces: the light it has gathered and what it carries on.
 #[derive(Clone, Debug)]
 pub struct PathState {
@@ -143,6 +153,11 @@ impl<'a> Integrator<'a> {
         self.bounces
     }
 
+    /// Most direct-lighting samples (so shadow or hemisphere rays) one shading point queues.
+    pub fn direct_samples_per_point(&self) -> u32 {
+        self.hemisphere_samples
+    }
+
     /// True when camera rays start paths to [`Integrator::shade`]; false when the camera ray's
     /// hit alone decides ([`Integrator::camera_only`]).
     pub fn traces_paths(&self) -> bool {
@@ -159,15 +174,15 @@ impl<'a> Integrator<'a> {
         }
     }
 
-    /// One step of `path`, whose last ray `ray` found `hit`: adds the emission seen there,
-    /// queues the direct-lighting samples of the hit in `direct` (traced and added later by
-    /// [`Integrator::direct_total`]), samples the BSDF and plays Russian roulette. Returns the
-    /// continuation ray, or `None` when the path ends. Random numbers are drawn from the path's
-    /// own generator in a fixed order (light samples, BSDF, roulette), so a path's value does
-    /// not depend on which other paths are shaded with it.
+    /// The first half of one step of `path`, whose last ray `ray` found `hit`: adds the
+    /// emission seen there and queues the hit's direct-lighting samples in `direct` (traced and
+    /// added later: [`Integrator::direct_total`]). Returns where the path scatters next, or
+    /// `None` when it ends here. [`Integrator::scatter`] is the second half.
     ///
-    /// `surface` is the scene's [`Scene::surface`] at `hit` (ignored for a miss): the caller
-    /// computes it for a whole batch first, where the loads of many hits overlap.
+    /// `surface` is [`Scene::surface`] at `hit` (ignored for a miss): the wavefront computes it
+    /// for a whole batch first, where the loads of many hits overlap. Random numbers are drawn
+    /// from the path's own generator in a fixed order (light samples, then BSDF, then
+    /// roulette), so a path's value does not depend on which paths are shaded with it.
     #[inline]
     pub fn shade(
         &self,
@@ -177,7 +192,7 @@ impl<'a> Integrator<'a> {
         surface: &SurfaceHit,
         direct: &mut DirectQueue,
         id: u32,
-    ) -> Option<Ray> {
+    ) -> Option<Scatter> {
         let (lo, hi) = self.bounces?;
         let counted = |k: u32| lo <= k && k <= hi;
         if !hit.is_hit() {
@@ -194,22 +209,28 @@ impl<'a> Integrator<'a> {
         let delta = bsdf::is_delta(&mat.bsdf);
         let frame = Frame::from_normal(s.shading_normal);
         let wo = frame.to_local(-ray.dir);
-        let rng = &mut path.rng;
         // Direct lighting here is light with one more bounce.
         if !delta && counted(path.depth + 1) && wo.z != 0.0 {
             direct.begin(id, path.beta);
             if self.settings.hemisphere_sampling {
-                self.queue_hemisphere(s, &mat.bsdf, &frame, wo, rng, direct);
+                self.queue_hemisphere(s, &mat.bsdf, &frame, wo, &mut path.rng, direct);
             } else {
-                self.queue_lights(s, &mat.bsdf, &frame, wo, rng, direct);
+                self.queue_lights(s, &mat.bsdf, &frame, wo, &mut path.rng, direct);
             }
         }
         // The continuation only brings light with at least this many bounces.
         let next = if delta { path.depth + 1 } else { path.depth + 2 };
-        if next > hi {
-            return None;
-        }
-        let bs = bsdf::sample_f(&mat.bsdf, wo, rng.next_2d(), rng.next_f32())?;
+        (next <= hi).then_some(Scatter { frame, wo })
+    }
+
+    /// The second half of a step ([`Integrator::shade`]): samples the BSDF at `surface` and
+    /// plays Russian roulette. Returns the continuation ray, or `None` when the path ends.
+    #[inline]
+    pub fn scatter(&self, path: &mut PathState, surface: &SurfaceHit, at: &Scatter) -> Option<Ray> {
+        let (s, Scatter { frame, wo }) = (surface, *at);
+        let rng = &mut path.rng;
+        let bsdf = &self.scene.materials[s.material as usize].bsdf;
+        let bs = bsdf::sample_f(bsdf, wo, rng.next_2d(), rng.next_f32())?;
         path.beta *= bs.weight;
         path.eta_scale *= bs.eta_scale;
         if path.beta.max_element() <= 0.0 {

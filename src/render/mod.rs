@@ -207,7 +207,7 @@ fn render_tile(
     let mut pixels = vec![PixelEstimate::default(); npix];
     // Per-pass buffers, sized for the largest pass (and kept by the worker).
     let cap = npix * batch as usize;
-    wavefront.reserve(cap);
+    wavefront.reserve(cap, integrator.direct_samples_per_point() as usize);
     let mut owner: Vec<u32> = Vec::with_capacity(cap);
     let mut log = RayLog::default();
     let mut phases = PhaseTimes::default();

@@ -17,9 +17,9 @@ pub enum RayOrder {
     /// Grouped by the octant of the direction (its three signs), as Embree's stream mode.
     Octant,
     /// By octant, then by the origin's cell along a Morton curve over the scene's bounds
-    /// (512 cells per axis).
+    /// (16 cells per axis).
     OctantMorton,
-    /// By the origin's Morton cell only.
+    /// By the origin's cell along a Morton curve over the scene's bounds (32 cells per axis).
     Morton,
 }
 
@@ -38,8 +38,12 @@ impl RayOrder {
     }
 }
 
-/// Bits per axis of the Morton key.
-const MORTON_BITS: u32 = 9;
+/// Bits per axis of the Morton key: 32 cells per axis, 15 bits, so that octant and cell fit
+/// the 16-bit key of two 8-bit radix passes.
+const MORTON_BITS: u32 = 5;
+
+/// Bits per axis under [`RayOrder::OctantMorton`] (3 bits are the octant's).
+const OCTANT_MORTON_BITS: u32 = 4;
 
 /// Spreads the low 10 bits of `x` to every third bit.
 #[inline]
@@ -57,27 +61,28 @@ fn octant(d: Vec3) -> u32 {
     (d.x.is_sign_negative() as u32) | ((d.y.is_sign_negative() as u32) << 1) | ((d.z.is_sign_negative() as u32) << 2)
 }
 
-/// Maps points of a box to Morton codes of its cells.
+/// Maps points of a box to the Morton codes of its `2^bits` cells per axis.
 #[derive(Clone, Copy, Debug)]
 struct MortonGrid {
     lo: Vec3,
     scale: Vec3,
+    max: f32,
 }
 
 impl MortonGrid {
-    fn new(bounds: &Aabb) -> Self {
-        let cells = (1u32 << MORTON_BITS) as f32;
+    fn new(bounds: &Aabb, bits: u32) -> Self {
+        let cells = (1u32 << bits) as f32;
         let extent = (bounds.max - bounds.min).max(Vec3::splat(f32::MIN_POSITIVE));
         let scale = Vec3::splat(cells) / extent;
         let ok = bounds.min.is_finite() && scale.is_finite();
-        Self { lo: if ok { bounds.min } else { Vec3::ZERO }, scale: if ok { scale } else { Vec3::ZERO } }
+        let (lo, scale) = if ok { (bounds.min, scale) } else { (Vec3::ZERO, Vec3::ZERO) };
+        Self { lo, scale, max: cells - 1.0 }
     }
 
     #[inline]
     fn code(&self, p: Vec3) -> u32 {
-        let max = ((1u32 << MORTON_BITS) - 1) as f32;
         // `as u32` saturates and sends NaN to 0: any origin gets a cell.
-        let c = ((p - self.lo) * self.scale).clamp(Vec3::ZERO, Vec3::splat(max));
+        let c = ((p - self.lo) * self.scale).clamp(Vec3::ZERO, Vec3::splat(self.max));
         spread3(c.x as u32) | (spread3(c.y as u32) << 1) | (spread3(c.z as u32) << 2)
     }
 }
@@ -85,38 +90,75 @@ impl MortonGrid {
 /// Buffers of [`SortScratch::sort`], kept from one sort to the next.
 #[derive(Clone, Debug, Default)]
 pub struct SortScratch {
-    keys: Vec<u64>,
+    keys: [Vec<u16>; 2],
+    index: [Vec<u32>; 2],
     rays: Vec<Ray>,
     owner: Vec<u32>,
 }
 
 impl SortScratch {
-    /// Sorts `rays` and `owner` (same length) together by `order`'s key, stably.
+    /// Makes room for sorting `n` rays.
+    pub fn reserve(&mut self, n: usize) {
+        for v in self.keys.iter_mut() {
+            v.reserve(n.saturating_sub(v.len()));
+        }
+        for v in self.index.iter_mut().chain([&mut self.owner]) {
+            v.reserve(n.saturating_sub(v.len()));
+        }
+        self.rays.reserve(n.saturating_sub(self.rays.len()));
+    }
+
+    /// Sorts `rays` and `owner` (same length) together by `order`'s key, stably (an LSD radix
+    /// sort on 16-bit keys: one or two counting passes).
     pub fn sort(&mut self, order: RayOrder, bounds: &Aabb, rays: &mut Vec<Ray>, owner: &mut Vec<u32>) {
         debug_assert_eq!(rays.len(), owner.len());
         if order == RayOrder::Queued || rays.len() < 2 {
             return;
         }
-        let grid = MortonGrid::new(bounds);
-        let key = |r: &Ray| -> u64 {
-            match order {
+        let grid =
+            MortonGrid::new(bounds, if order == RayOrder::OctantMorton { OCTANT_MORTON_BITS } else { MORTON_BITS });
+        let key = |r: &Ray| -> u16 {
+            (match order {
                 RayOrder::Queued => 0,
-                RayOrder::Octant => octant(r.dir) as u64,
-                RayOrder::OctantMorton => ((octant(r.dir) as u64) << 27) | grid.code(r.origin) as u64,
-                RayOrder::Morton => grid.code(r.origin) as u64,
-            }
+                RayOrder::Octant => octant(r.dir),
+                RayOrder::OctantMorton => (octant(r.dir) << (3 * OCTANT_MORTON_BITS)) | grid.code(r.origin),
+                RayOrder::Morton => grid.code(r.origin),
+            }) as u16
         };
-        // The index in the low bits makes keys unique: an unstable sort is then stable.
-        self.keys.clear();
-        self.keys.extend(rays.iter().enumerate().map(|(i, r)| (key(r) << 32) | i as u64));
-        self.keys.sort_unstable();
-        self.rays.clear();
-        self.owner.clear();
-        for &k in &self.keys {
-            let i = k as u32 as usize;
-            self.rays.push(rays[i]);
-            self.owner.push(owner[i]);
+        let [k0, k1] = &mut self.keys;
+        let [i0, i1] = &mut self.index;
+        k0.clear();
+        k0.extend(rays.iter().map(key));
+        i0.clear();
+        i0.extend(0..rays.len() as u32);
+        let passes = if order == RayOrder::Octant { 1 } else { 2 };
+        for pass in 0..passes {
+            let shift = 8 * pass;
+            let mut start = [0u32; 256];
+            for &k in k0.iter() {
+                start[(k >> shift) as usize & 0xff] += 1;
+            }
+            let mut sum = 0;
+            for s in start.iter_mut() {
+                (*s, sum) = (sum, sum + *s);
+            }
+            k1.clear();
+            k1.resize(k0.len(), 0);
+            i1.clear();
+            i1.resize(i0.len(), 0);
+            for (&k, &i) in k0.iter().zip(i0.iter()) {
+                let b = &mut start[(k >> shift) as usize & 0xff];
+                k1[*b as usize] = k;
+                i1[*b as usize] = i;
+                *b += 1;
+            }
+            std::mem::swap(k0, k1);
+            std::mem::swap(i0, i1);
         }
+        self.rays.clear();
+        self.rays.extend(i0.iter().map(|&i| rays[i as usize]));
+        self.owner.clear();
+        self.owner.extend(i0.iter().map(|&i| owner[i as usize]));
         std::mem::swap(rays, &mut self.rays);
         std::mem::swap(owner, &mut self.owner);
     }
@@ -141,15 +183,31 @@ mod tests {
 
     #[test]
     fn morton_cells_follow_the_curve() {
-        let grid = MortonGrid::new(&Aabb { min: Vec3::ZERO, max: Vec3::splat(512.0) });
+        let grid = MortonGrid::new(&Aabb { min: Vec3::ZERO, max: Vec3::splat(32.0) }, MORTON_BITS);
         assert_eq!(grid.code(Vec3::new(0.5, 0.5, 0.5)), 0);
         assert_eq!(grid.code(Vec3::new(1.5, 0.5, 0.5)), 1);
         assert_eq!(grid.code(Vec3::new(0.5, 1.5, 0.5)), 2);
         assert_eq!(grid.code(Vec3::new(0.5, 0.5, 1.5)), 4);
-        assert_eq!(grid.code(Vec3::splat(1e9)), (1 << 27) - 1, "outside: clamped");
+        assert_eq!(grid.code(Vec3::splat(1e9)), (1 << 15) - 1, "outside: clamped");
         assert_eq!(grid.code(Vec3::splat(f32::NAN)), 0);
         // A degenerate box still gives every point a cell.
-        let flat = MortonGrid::new(&Aabb { min: Vec3::ZERO, max: Vec3::new(1.0, 1.0, 0.0) });
-        assert!(flat.code(Vec3::new(0.5, 0.5, 0.0)) < 1 << 27);
+        let flat = MortonGrid::new(&Aabb { min: Vec3::ZERO, max: Vec3::new(1.0, 1.0, 0.0) }, MORTON_BITS);
+        assert!(flat.code(Vec3::new(0.5, 0.5, 0.0)) < 1 << 15);
+    }
+
+    #[test]
+    fn radix_order_is_the_key_order_and_stable() {
+        // Rays on a line through the box in a scrambled order: Morton order sorts them by x
+        // (cells along x alone are Morton codes 0, 1, 8, 9, ...), equal cells keep their order.
+        let bounds = Aabb { min: Vec3::ZERO, max: Vec3::splat(32.0) };
+        let xs: Vec<f32> = (0..200).map(|i| ((i * 37) % 64) as f32 * 0.5).collect();
+        let mut rays: Vec<Ray> = xs.iter().map(|&x| Ray::new(Vec3::new(x, 0.0, 0.0), Vec3::X)).collect();
+        let mut owner: Vec<u32> = (0..200).collect();
+        SortScratch::default().sort(RayOrder::Morton, &bounds, &mut rays, &mut owner);
+        for w in owner.windows(2) {
+            let (a, b) = (xs[w[0] as usize].floor(), xs[w[1] as usize].floor());
+            assert!(a < b || (a == b && w[0] < w[1]), "{w:?}");
+        }
+        assert!(rays.iter().zip(&owner).all(|(r, &o)| r.origin.x == xs[o as usize]));
     }
 }

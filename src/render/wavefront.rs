@@ -17,7 +17,7 @@
 //! whatever else is in the batch, and every ray gets the same answer from the stream kernels as
 //! alone, so the image does not depend on the batch, the order of the rays or the thread.
 
-use super::integrator::{Integrator, PathState};
+use super::integrator::{Integrator, PathState, Scatter};
 use super::order::{RayOrder, SortScratch};
 use super::queue::{DirectQueue, RayQueue};
 use super::sampler::Rng;
@@ -54,6 +54,8 @@ pub struct Wavefront {
     alive: Vec<bool>,
     /// `surfaces[k]`: the surface hit by `queue.rays[k]`, if any.
     surfaces: Vec<SurfaceHit>,
+    /// `scatter[k]`: where the path of `queue.rays[k]` scatters, if it goes on.
+    scatter: Vec<Option<Scatter>>,
     /// Direct lighting of the current bounce.
     direct: DirectQueue,
     scratch: SortScratch,
@@ -65,18 +67,28 @@ impl Wavefront {
         Self::default()
     }
 
-    /// Makes room for batches of `paths` paths.
-    pub fn reserve(&mut self, paths: usize) {
-        self.paths.reserve(paths.saturating_sub(self.paths.len()));
-        for v in [&mut self.queue, &mut self.direct.shadow, &mut self.direct.probes] {
-            v.rays.reserve(paths.saturating_sub(v.rays.len()));
-            v.owner.reserve(paths.saturating_sub(v.owner.len()));
-            v.hits.reserve(paths.saturating_sub(v.hits.len()));
-            v.occluded.reserve(paths.saturating_sub(v.occluded.len()));
+    /// Makes room for batches of `paths` paths with at most `direct` direct-lighting samples
+    /// per shading point, so that tracing them allocates nothing.
+    pub fn reserve(&mut self, paths: usize, direct: usize) {
+        fn room<T>(v: &mut Vec<T>, n: usize) {
+            v.reserve(n.saturating_sub(v.len()));
         }
-        self.alive.reserve(paths.saturating_sub(self.alive.len()));
-        self.direct.points.reserve(paths.saturating_sub(self.direct.points.len()));
-        self.direct.samples.reserve(paths.saturating_sub(self.direct.samples.len()));
+        // The shading of a bounce stops to trace its direct lighting past DIRECT_FLUSH samples.
+        let samples = (paths * direct.max(1)).min(DIRECT_FLUSH + direct);
+        room(&mut self.paths, paths);
+        room(&mut self.alive, paths);
+        room(&mut self.surfaces, paths);
+        room(&mut self.scatter, paths);
+        room(&mut self.direct.points, paths);
+        room(&mut self.direct.samples, samples);
+        for (q, n) in [(&mut self.queue, paths), (&mut self.direct.shadow, samples), (&mut self.direct.probes, samples)]
+        {
+            room(&mut q.rays, n);
+            room(&mut q.owner, n);
+            room(&mut q.hits, n);
+            room(&mut q.occluded, n);
+        }
+        self.scratch.reserve(samples.max(paths));
     }
 
     /// Starts a new batch.
@@ -136,10 +148,24 @@ impl Wavefront {
                     *s = scene.surface(ray, hit);
                 }
             }
+            self.scatter.clear();
             for k in 0..q.rays.len() {
                 let id = q.owner[k];
+                let path = &mut self.paths[id as usize];
+                self.scatter.push(integrator.shade(path, &q.rays[k], &q.hits[k], &self.surfaces[k], d, id));
+                if d.samples.len() >= DIRECT_FLUSH {
+                    // Many light samples per point (`-l`): trace what is queued now, so that
+                    // the queue stays bounded.
+                    clock.lap(&mut times.shade);
+                    let ctx = DirectContext { integrator, order, bounds: &bounds };
+                    ctx.trace(d, &mut self.paths, &mut self.scratch, log, &mut clock, times);
+                    d.clear();
+                }
+            }
+            clock.lap(&mut times.shade);
+            for (k, at) in self.scatter.iter().enumerate() {
                 let next =
-                    integrator.shade(&mut self.paths[id as usize], &q.rays[k], &q.hits[k], &self.surfaces[k], d, id);
+                    at.and_then(|at| integrator.scatter(&mut self.paths[q.owner[k] as usize], &self.surfaces[k], &at));
                 if let Some(next) = next {
                     q.rays[k] = next;
                 }
@@ -147,37 +173,8 @@ impl Wavefront {
             }
             clock.lap(&mut times.shade);
 
-            // Direct lighting: the shadow rays as one occlusion stream, the hemisphere rays as
-            // one closest-hit stream.
-            let s = &mut d.shadow;
-            if !s.is_empty() {
-                log_rays(log, RayKind::Shadow, &s.rays);
-                s.sort(order.shadow, &bounds, &mut self.scratch);
-                clock.lap(&mut times.sort);
-                resize(&mut s.occluded, s.rays.len(), false);
-                tracer.occluded_batch(&s.rays, &mut s.occluded);
-                clock.lap(&mut times.trace[RayKind::Shadow as usize]);
-                for (&blocked, &i) in s.occluded.iter().zip(&s.owner) {
-                    d.samples[i as usize].visible = !blocked;
-                }
-            }
-            let p = &mut d.probes;
-            if !p.is_empty() {
-                log_rays(log, RayKind::Bounce, &p.rays);
-                p.sort(order.bounce, &bounds, &mut self.scratch);
-                clock.lap(&mut times.sort);
-                resize(&mut p.hits, p.rays.len(), Hit::MISS);
-                tracer.closest_batch(&p.rays, &mut p.hits);
-                clock.lap(&mut times.trace[RayKind::Bounce as usize]);
-                for ((ray, hit), &i) in p.rays.iter().zip(&p.hits).zip(&p.owner) {
-                    d.samples[i as usize].radiance = integrator.probe_radiance(hit, ray.dir);
-                }
-            }
-            for (i, point) in d.points.iter().enumerate() {
-                let path = &mut self.paths[point.path as usize];
-                path.l += point.weight * integrator.direct_total(d.samples_of(i));
-            }
-            clock.lap(&mut times.shade);
+            let ctx = DirectContext { integrator, order, bounds: &bounds };
+            ctx.trace(d, &mut self.paths, &mut self.scratch, log, &mut clock, times);
 
             // Compact the survivors, order and trace their continuations.
             q.retain(&self.alive);
@@ -186,6 +183,7 @@ impl Wavefront {
                 return;
             }
             log_rays(log, RayKind::Bounce, &q.rays);
+            clock.lap(&mut times.compact);
             q.sort(order.bounce, &bounds, &mut self.scratch);
             clock.lap(&mut times.sort);
             resize(&mut q.hits, q.rays.len(), Hit::MISS);
@@ -194,6 +192,63 @@ impl Wavefront {
         }
     }
 }
+
+/// What tracing a bounce's direct lighting needs besides its queue.
+struct DirectContext<'i, 'a> {
+    integrator: &'i Integrator<'a>,
+    order: StreamOrder,
+    bounds: &'i crate::math::Aabb,
+}
+
+impl DirectContext<'_, '_> {
+    /// Traces the shadow rays of `d` as one occlusion stream and its hemisphere rays as one
+    /// closest-hit stream, then adds each point's direct lighting to its path.
+    fn trace(
+        &self,
+        d: &mut DirectQueue,
+        paths: &mut [PathState],
+        scratch: &mut SortScratch,
+        log: &mut RayLog,
+        clock: &mut Clock,
+        times: &mut PhaseTimes,
+    ) {
+        let (integrator, order, bounds, tracer) = (self.integrator, self.order, self.bounds, self.integrator.tracer());
+        let s = &mut d.shadow;
+        if !s.is_empty() {
+            log_rays(log, RayKind::Shadow, &s.rays);
+            clock.lap(&mut times.shade);
+            s.sort(order.shadow, bounds, scratch);
+            clock.lap(&mut times.sort);
+            resize(&mut s.occluded, s.rays.len(), false);
+            tracer.occluded_batch(&s.rays, &mut s.occluded);
+            clock.lap(&mut times.trace[RayKind::Shadow as usize]);
+            for (&blocked, &i) in s.occluded.iter().zip(&s.owner) {
+                d.samples[i as usize].visible = !blocked;
+            }
+        }
+        let p = &mut d.probes;
+        if !p.is_empty() {
+            log_rays(log, RayKind::Bounce, &p.rays);
+            clock.lap(&mut times.shade);
+            p.sort(order.bounce, bounds, scratch);
+            clock.lap(&mut times.sort);
+            resize(&mut p.hits, p.rays.len(), Hit::MISS);
+            tracer.closest_batch(&p.rays, &mut p.hits);
+            clock.lap(&mut times.trace[RayKind::Bounce as usize]);
+            for ((ray, hit), &i) in p.rays.iter().zip(&p.hits).zip(&p.owner) {
+                d.samples[i as usize].radiance = integrator.probe_radiance(hit, ray.dir);
+            }
+        }
+        for (i, point) in d.points.iter().enumerate() {
+            let path = &mut paths[point.path as usize];
+            path.l += point.weight * integrator.direct_total(d.samples_of(i));
+        }
+        clock.lap(&mut times.shade);
+    }
+}
+
+/// Direct-lighting samples queued before the bounce's shading is interrupted to trace them.
+const DIRECT_FLUSH: usize = 1 << 16;
 
 /// What stands in `surfaces` for a ray that hit nothing.
 const MISSED: SurfaceHit =
