@@ -1,11 +1,13 @@
 //! Integrators: the radiance a camera ray brings back (CS184 parts 3–4; pbrt-v4's
 //! `PathIntegrator` without multiple importance sampling).
 //!
-//! A path is traced iteratively. At each non-specular hit, direct lighting is estimated either
-//! by sampling the lights (`-l` samples per area light, one per delta light) and tracing shadow
-//! rays, or (`-H`) by tracing uniformly distributed hemisphere rays and adding the emission
-//! they find (as many as light sampling would trace). The path then continues in a direction
-//! drawn from the BSDF. Emission met by the continuation is counted only right after the
+//! A path advances one bounce at a time, in two steps the wavefront ([`super::wavefront`])
+//! runs over a whole batch of paths: [`Integrator::shade`] and [`Integrator::scatter`]; the
+//! rays they ask for are traced between the steps, many paths' at once. At each non-specular
+//! hit, direct lighting is estimated either by sampling the lights (`-l` samples per area
+//! light, one per delta light) and tracing shadow rays, or (`-H`) by tracing uniformly
+//! distributed hemisphere rays and adding the emission they find (as many as light sampling
+//! would trace). The path then continues in a direction drawn from the BSDF. Emission met by the continuation is counted only right after the
 //! camera or a specular bounce (mirror, glass): everywhere else direct lighting has already
 //! accounted for it. Light is split by bounces: `k` bounces is light scattered `k` times on
 //! its way to the camera (0: emission seen directly; 1: direct lighting). Each integrator

@@ -48,7 +48,9 @@ impl StreamOrder {
 pub struct Wavefront {
     /// Paths of the batch, in camera-ray order.
     paths: Vec<PathState>,
-    /// The rays of the current bounce, each owned by its path.
+    /// The camera rays of the batch, owned by their paths.
+    camera: RayQueue,
+    /// The rays of the current bounce of the current wave, each owned by its path.
     queue: RayQueue,
     /// `alive[k]`: the path of `queue.rays[k]` goes on (its continuation replaced the ray).
     alive: Vec<bool>,
@@ -94,7 +96,7 @@ impl Wavefront {
     /// Starts a new batch.
     pub fn clear(&mut self) {
         self.paths.clear();
-        self.queue.clear();
+        self.camera.clear();
     }
 
     /// Number of paths in the batch.
@@ -110,7 +112,7 @@ impl Wavefront {
     /// Adds a path starting with camera ray `ray`, drawing from `rng`.
     #[inline]
     pub fn push_camera(&mut self, ray: Ray, rng: Rng) {
-        self.queue.push(ray, self.paths.len() as u32);
+        self.camera.push(ray, self.paths.len() as u32);
         self.paths.push(PathState::new(rng));
     }
 
@@ -125,17 +127,43 @@ impl Wavefront {
         let tracer = integrator.tracer();
         let bounds = tracer.scene().bounds();
         let mut clock = Clock::start();
-        let q = &mut self.queue;
-        resize(&mut q.hits, q.rays.len(), Hit::MISS);
-        tracer.closest_batch(&q.rays, &mut q.hits);
+        let c = &mut self.camera;
+        resize(&mut c.hits, c.rays.len(), Hit::MISS);
+        tracer.closest_batch(&c.rays, &mut c.hits);
         clock.lap(&mut times.trace[RayKind::Camera as usize]);
         if !integrator.traces_paths() {
-            for (k, &id) in q.owner.iter().enumerate() {
-                self.paths[id as usize].l = integrator.camera_only(&q.rays[k], &q.hits[k]);
+            for (k, &id) in c.owner.iter().enumerate() {
+                self.paths[id as usize].l = integrator.camera_only(&c.rays[k], &c.hits[k]);
             }
             clock.lap(&mut times.shade);
             return;
         }
+        // The paths go on in waves of WAVE_PATHS, whose queues stay in the cache.
+        let n = c.rays.len();
+        for start in (0..n).step_by(WAVE_PATHS) {
+            let end = (start + WAVE_PATHS).min(n);
+            let (c, q) = (&self.camera, &mut self.queue);
+            q.clear();
+            q.rays.extend_from_slice(&c.rays[start..end]);
+            q.owner.extend_from_slice(&c.owner[start..end]);
+            q.hits.clear();
+            q.hits.extend_from_slice(&c.hits[start..end]);
+            clock.lap(&mut times.generate);
+            self.advance(integrator, order, &bounds, log, &mut clock, times);
+        }
+    }
+
+    /// Advances the paths of `queue` (rays traced, `hits` found) to their ends.
+    fn advance(
+        &mut self,
+        integrator: &Integrator,
+        order: StreamOrder,
+        bounds: &crate::math::Aabb,
+        log: &mut RayLog,
+        clock: &mut Clock,
+        times: &mut PhaseTimes,
+    ) {
+        let tracer = integrator.tracer();
         loop {
             // Shade: each surviving path's continuation replaces its ray.
             let (q, d) = (&mut self.queue, &mut self.direct);
@@ -157,8 +185,8 @@ impl Wavefront {
                     // Many light samples per point (`-l`): trace what is queued now, so that
                     // the queue stays bounded.
                     clock.lap(&mut times.shade);
-                    let ctx = DirectContext { integrator, order, bounds: &bounds };
-                    ctx.trace(d, &mut self.paths, &mut self.scratch, log, &mut clock, times);
+                    let ctx = DirectContext { integrator, order, bounds };
+                    ctx.trace(d, &mut self.paths, &mut self.scratch, log, clock, times);
                     d.clear();
                 }
             }
@@ -173,8 +201,8 @@ impl Wavefront {
             }
             clock.lap(&mut times.shade);
 
-            let ctx = DirectContext { integrator, order, bounds: &bounds };
-            ctx.trace(d, &mut self.paths, &mut self.scratch, log, &mut clock, times);
+            let ctx = DirectContext { integrator, order, bounds };
+            ctx.trace(d, &mut self.paths, &mut self.scratch, log, clock, times);
 
             // Compact the survivors, order and trace their continuations.
             q.retain(&self.alive);
@@ -184,7 +212,7 @@ impl Wavefront {
             }
             log_rays(log, RayKind::Bounce, &q.rays);
             clock.lap(&mut times.compact);
-            q.sort(order.bounce, &bounds, &mut self.scratch);
+            q.sort(order.bounce, bounds, &mut self.scratch);
             clock.lap(&mut times.sort);
             resize(&mut q.hits, q.rays.len(), Hit::MISS);
             tracer.closest_batch(&q.rays, &mut q.hits);
@@ -246,6 +274,10 @@ impl DirectContext<'_, '_> {
         clock.lap(&mut times.shade);
     }
 }
+
+/// Paths advanced together: a wave's queues (rays, hits, surfaces, shadow rays) stay in the
+/// L2 cache beside the BVH's upper levels.
+const WAVE_PATHS: usize = 1024;
 
 /// Direct-lighting samples queued before the bounce's shading is interrupted to trace them.
 const DIRECT_FLUSH: usize = 1 << 16;
