@@ -504,17 +504,9 @@ impl BenchReport {
     }
 }
 
-/// Writes `text` to `path` atomically (a temporary file in the same directory, then a rename).
+/// Writes `text` to `path` atomically and safely ([`crate::io::output::write_file`]).
 pub fn write_atomically(path: &std::path::Path, text: &str) -> Result<(), BenchError> {
-    let io = |source| BenchError::Io { path: path.to_path_buf(), source };
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
-    let name = path.file_name().ok_or_else(|| io(std::io::Error::other("not a file name")))?;
-    let tmp = dir.join(format!(".{}.tmp{}", name.to_string_lossy(), std::process::id()));
-    std::fs::write(&tmp, text).map_err(io)?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        io(e)
-    })
+    crate::io::output::write_file(path, text.as_bytes()).map_err(|e| BenchError::Io { path: e.path, source: e.source })
 }
 
 #[cfg(test)]

@@ -16,6 +16,8 @@ use std::time::Instant;
 pub struct InfoOptions {
     /// Build qualities to time, in order.
     pub qualities: Vec<BuildQuality>,
+    /// The loader's limits.
+    pub load: crate::io::LoadOptions,
     /// Commit through the BVH cache in this directory ([`SceneBuilder::commit_cached`]).
     pub cache_dir: Option<PathBuf>,
     /// Check the structural invariants of both BVHs after each build.
@@ -40,6 +42,7 @@ impl Default for InfoOptions {
     fn default() -> Self {
         Self {
             qualities: vec![BuildQuality::Fast, BuildQuality::Medium, BuildQuality::High],
+            load: crate::io::LoadOptions::default(),
             cache_dir: None,
             validate: false,
             keep_bvh2: false,
@@ -193,7 +196,7 @@ pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, InfoErro
         ));
     }
     let t = Instant::now();
-    let (builder, warnings) = crate::io::load_scene_with_warnings(path)?;
+    let (builder, warnings) = crate::io::load_scene_with_options(path, &opts.load)?;
     let load_seconds = t.elapsed().as_secs_f64();
     let mut info = SceneInfo {
         path: path.to_path_buf(),

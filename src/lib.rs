@@ -64,6 +64,7 @@ pub mod info;
 pub mod io;
 pub mod kernels;
 pub mod math;
+pub mod memory;
 pub mod ray;
 pub mod raysets;
 pub mod render;

@@ -72,7 +72,17 @@ struct BenchArgs {
     /// or RAYPACK_ISA) and limit Embree to it.
     #[arg(long, value_parser = parse_isa)]
     isa: Option<Isa>,
+    /// Refuse scenes of more than N triangles and spheres (after triangulation and COLLADA
+    /// instancing).
+    #[arg(long, value_name = "N", long_help = MAX_PRIMITIVES_HELP)]
+    max_primitives: Option<u64>,
 }
+
+const MAX_PRIMITIVES_HELP: &str = "Refuse scenes of more than N triangles and spheres, counted after \
+    triangulation and COLLADA instancing, with an error naming the line or element where the count \
+    passes N. Without it there is no cap, except that COLLADA instancing may expand a file to at most \
+    64 node visits, vertices, triangles and spheres per byte of the file (at least 2^20); with it, \
+    that budget becomes at least 4 per primitive allowed. A service sets its own cap here.";
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum IntegratorArg {
@@ -166,6 +176,10 @@ struct RenderArgs {
     /// Order of the bounce-ray streams (default: the one measured fastest for the kernels).
     #[arg(long, value_enum)]
     bounce_order: Option<RayOrderArg>,
+    /// Refuse scenes of more than N triangles and spheres (after triangulation and COLLADA
+    /// instancing).
+    #[arg(long, value_name = "N", long_help = MAX_PRIMITIVES_HELP)]
+    max_primitives: Option<u64>,
 }
 
 /// `--shadow-order` / `--bounce-order`: [`render::RayOrder`].
@@ -242,6 +256,10 @@ struct InfoArgs {
     /// or RAYPACK_ISA) and limit Embree to it.
     #[arg(long, value_parser = parse_isa)]
     isa: Option<Isa>,
+    /// Refuse scenes of more than N triangles and spheres (after triangulation and COLLADA
+    /// instancing).
+    #[arg(long, value_name = "N", long_help = MAX_PRIMITIVES_HELP)]
+    max_primitives: Option<u64>,
 }
 
 /// Parses `--isa`, refusing a tier the CPU lacks.
@@ -260,6 +278,8 @@ enum CliError {
     Image(#[from] render::ImageError),
     #[error(transparent)]
     Bench(#[from] raypack::bench::BenchError),
+    #[error(transparent)]
+    Output(#[from] raypack::io::output::OutputError),
     #[error("{0}")]
     Usage(String),
 }
@@ -304,11 +324,32 @@ fn main() -> ExitCode {
 }
 
 /// Loads SCENE (or the built-in Cornell box); returns the loader's warnings for printing.
-fn load(scene: Option<&Path>) -> Result<(SceneBuilder, Vec<String>), CliError> {
+fn load(scene: Option<&Path>, max_primitives: Option<u64>) -> Result<(SceneBuilder, Vec<String>), CliError> {
+    let opts = raypack::io::LoadOptions { max_primitives };
     Ok(match scene {
-        Some(p) => raypack::io::load_scene_with_warnings(p)?,
+        Some(p) => raypack::io::load_scene_with_options(p, &opts)?,
         None => (raypack::io::default_scene(), Vec::new()),
     })
+}
+
+/// Refuses an image (or ray set) of `width × height` whose buffers, `needed` bytes in all
+/// (`per_pixel` per pixel), cannot fit in the memory this process may still use.
+fn check_memory(width: usize, height: usize, needed: u64, per_pixel: u64) -> Result<(), CliError> {
+    use raypack::memory::{available, human};
+    let Some(avail) = available() else { return Ok(()) };
+    if needed <= avail.bytes {
+        return Ok(());
+    }
+    // The largest image of the same shape that fits.
+    let scale = (avail.bytes as f64 / needed as f64).sqrt();
+    let (w, h) = (((width as f64 * scale) as usize).max(1), ((height as f64 * scale) as usize).max(1));
+    Err(CliError::Usage(format!(
+        "-r {width} {height}: needs about {} for the buffers that grow with the image ({per_pixel} bytes per pixel), but only {} \
+         can be allocated ({}); use a smaller size, such as -r {w} {h}",
+        human(needed),
+        human(avail.bytes),
+        avail.source
+    )))
 }
 
 fn print_warnings(warnings: &[String]) {
@@ -366,30 +407,26 @@ fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         let stem = a.scene.as_ref().and_then(|s| s.file_stem()).map(|s| s.to_string_lossy().into_owned());
         PathBuf::from(format!("{}.png", stem.as_deref().unwrap_or("cornell")))
     });
+    // The outputs are checked before anything is computed: `-` is standard output; otherwise
+    // only a regular file that is not an input (or nothing, or a FIFO) may be written.
+    let to_stdout = output == Path::new("-");
+    if to_stdout && adaptive.is_some() {
+        return Err(CliError::Usage("-f - with -a: the sample-rate image needs a file name (-f NAME.png)".into()));
+    }
+    let inputs: Vec<&Path> = [a.scene.as_deref(), a.camera.as_deref()].into_iter().flatten().collect();
+    let out_opts = raypack::io::output::OutputOptions::protecting(&inputs);
+    let rate_path = adaptive.map(|_| render::adaptive::rate_path(&output));
+    if !to_stdout {
+        for p in std::iter::once(&output).chain(&rate_path) {
+            raypack::io::output::check_target(p, &out_opts)?;
+        }
+    }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.unwrap_or(0))
         .build()
         .map_err(|e| CliError::Usage(e.to_string()))?;
     pool.install(|| {
-        eprint!("[raypack] Collecting primitives... ");
-        let t = Instant::now();
-        let (builder, warnings) = load(a.scene.as_deref())?;
-        let load_time = t.elapsed().as_secs_f64();
-        eprintln!("Done! ({load_time:.4} sec)");
-        print_warnings(&warnings);
-        let opts = BuildOptions { quality: a.quality.into(), watertight: a.watertight, ..BuildOptions::default() };
-        let t = Instant::now();
-        let mut scene = commit(builder, &opts, a.bvh_cache.as_deref());
-        let setup_time = [("load", load_time), ("BVH build", t.elapsed().as_secs_f64())];
-        if let Some(isa) = a.isa {
-            scene.set_isa(isa).map_err(|e| CliError::Usage(e.to_string()))?;
-        }
-        let aspect = width as f32 / height as f32;
-        let camera = match &a.camera {
-            Some(p) => raypack::io::camera_file::load_camera_file(p)?,
-            None => scene.camera_or_framing(aspect),
-        };
-        let settings = RenderSettings {
+        let mut settings = RenderSettings {
             width,
             height,
             samples_per_pixel: a.samples.max(1),
@@ -401,17 +438,40 @@ fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             seed: a.seed,
             brute_force: a.brute_force,
             russian_roulette: !a.no_russian_roulette,
-            stream_order: match (a.shadow_order, a.bounce_order) {
-                (None, None) => None,
-                (shadow, bounce) => {
-                    let default = render::StreamOrder::default_for(scene.isa());
-                    Some(render::StreamOrder {
-                        shadow: shadow.map_or(default.shadow, Into::into),
-                        bounce: bounce.map_or(default.bounce, Into::into),
-                    })
-                }
-            },
+            stream_order: None,
         };
+        let format = render::ImageFormat::of(&output);
+        let exr = format == render::ImageFormat::Exr;
+        check_memory(
+            width,
+            height,
+            raypack::memory::render_bytes(&settings, rayon::current_num_threads(), exr),
+            raypack::memory::render_bytes_per_pixel(&settings, exr),
+        )?;
+        // Read before the scene: a bad camera file fails at once.
+        let file_camera = a.camera.as_deref().map(raypack::io::camera_file::load_camera_file).transpose()?;
+        eprint!("[raypack] Collecting primitives... ");
+        let t = Instant::now();
+        let (builder, warnings) = load(a.scene.as_deref(), a.max_primitives)?;
+        let load_time = t.elapsed().as_secs_f64();
+        eprintln!("Done! ({load_time:.4} sec)");
+        print_warnings(&warnings);
+        let opts = BuildOptions { quality: a.quality.into(), watertight: a.watertight, ..BuildOptions::default() };
+        let t = Instant::now();
+        let mut scene = commit(builder, &opts, a.bvh_cache.as_deref());
+        let setup_time = [("load", load_time), ("BVH build", t.elapsed().as_secs_f64())];
+        if let Some(isa) = a.isa {
+            scene.set_isa(isa).map_err(|e| CliError::Usage(e.to_string()))?;
+        }
+        if a.shadow_order.is_some() || a.bounce_order.is_some() {
+            let default = render::StreamOrder::default_for(scene.isa());
+            settings.stream_order = Some(render::StreamOrder {
+                shadow: a.shadow_order.map_or(default.shadow, Into::into),
+                bounce: a.bounce_order.map_or(default.bounce, Into::into),
+            });
+        }
+        let aspect = width as f32 / height as f32;
+        let camera = file_camera.unwrap_or_else(|| scene.camera_or_framing(aspect));
         let bar = progress_bar(width.div_ceil(render::TILE) * height.div_ceil(render::TILE));
         eprintln!(
             "[raypack] Rendering {width}x{height} with {} threads ({} kernels)...",
@@ -423,13 +483,31 @@ fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         eprintln!("[raypack] Rendering... 100%! ({:.4}s)", out.stats.time.as_secs_f64());
         report(&scene, &settings, &out, setup_time);
         let t = Instant::now();
-        eprint!("[raypack] Saving to file: {}... ", output.display());
-        out.film.write(&output, settings.integrator.encoding())?;
-        if let Some((batch, tol)) = settings.adaptive {
-            let rate = render::adaptive::rate_path(&output);
-            let film = render::adaptive::rate_film(&out.samples_per_pixel, width, height, settings.samples_per_pixel);
-            film.write(&rate, render::Encoding::Display)?;
-            eprint!("(sample rate: {}, batch {batch}, tolerance {tol}) ", rate.display());
+        let encode = |film: &render::Film, path: &Path, format, encoding| {
+            film.encode(format, encoding).map_err(|message| render::ImageError::Encode { path: path.into(), message })
+        };
+        let image = encode(&out.film, &output, format, settings.integrator.encoding())?;
+        if to_stdout {
+            eprint!("[raypack] Writing the image to standard output... ");
+            use std::io::Write;
+            let mut stdout = std::io::stdout().lock();
+            stdout
+                .write_all(&image)
+                .and_then(|()| stdout.flush())
+                .map_err(|source| render::ImageError::Io { path: output.clone(), source })?;
+        } else {
+            use raypack::io::output::{commit_all, stage};
+            eprint!("[raypack] Saving to file: {}... ", output.display());
+            let mut files = vec![stage(&output, &out_opts, &mut |w| w.write_all(&image))?];
+            if let (Some(rate), Some((batch, tol))) = (&rate_path, settings.adaptive) {
+                let spp = settings.samples_per_pixel;
+                let film = render::adaptive::rate_film(&out.samples_per_pixel, width, height, spp);
+                let bytes = encode(&film, rate, render::ImageFormat::Png, render::Encoding::Display)?;
+                files.push(stage(rate, &out_opts, &mut |w| w.write_all(&bytes))?);
+                eprint!("(sample rate: {}, batch {batch}, tolerance {tol}) ", rate.display());
+            }
+            // The image and its sample-rate image: both or neither.
+            commit_all(files)?;
         }
         eprintln!("Done! ({:.4} sec)", t.elapsed().as_secs_f64());
         Ok(())
@@ -503,6 +581,7 @@ fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
         return Err(CliError::Usage("-t 0: need at least one thread".into()));
     }
     let mut opts = InfoOptions {
+        load: raypack::io::LoadOptions { max_primitives: a.max_primitives },
         cache_dir: a.bvh_cache.clone(),
         validate: a.validate,
         keep_bvh2: a.keep_bvh2,
@@ -535,7 +614,8 @@ fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
 }
 
 fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
-    use raypack::bench::{BenchSettings, BuildFigures, raypack_accel_bytes, run_bench, write_atomically};
+    use raypack::bench::{BenchSettings, BuildFigures, raypack_accel_bytes, run_bench};
+    use raypack::io::output::{OutputOptions, check_target, write_file_with};
     let (width, height) = (a.resolution[0], a.resolution[1]);
     if width == 0 || height == 0 || width > 1 << 15 || height > 1 << 15 {
         return Err(CliError::Usage(format!("-r {width} {height}: width and height must be between 1 and 32768")));
@@ -556,7 +636,13 @@ fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     if settings.against_embree && !cfg!(feature = "embree") {
         return Err(raypack::bench::BenchError::EmbreeNotBuilt.into());
     }
-    let (builder, warnings) = load(Some(&a.scene))?;
+    let json_opts = OutputOptions::protecting(&[&a.scene]);
+    if let Some(p) = a.json.as_deref().filter(|p| *p != Path::new("-")) {
+        check_target(p, &json_opts)?;
+    }
+    let per_ray = raypack::memory::BENCH_BYTES_PER_PIXEL;
+    check_memory(width, height, (width * height) as u64 * per_ray, per_ray)?;
+    let (builder, warnings) = load(Some(&a.scene), a.max_primitives)?;
     print_warnings(&warnings);
     let quality: BuildQuality = a.quality.into();
     let t = Instant::now();
@@ -590,7 +676,7 @@ fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     match a.json.as_deref() {
         Some(p) if p == Path::new("-") => println!("{:#}", out.json()),
         Some(p) => {
-            write_atomically(p, &format!("{:#}\n", out.json()))?;
+            write_file_with(p, format!("{:#}\n", out.json()).as_bytes(), &json_opts)?;
             print!("{}", out.table());
         }
         None => print!("{}", out.table()),

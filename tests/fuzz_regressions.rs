@@ -147,8 +147,7 @@ fn obj_material_library_with_a_short_colour_is_a_warning_not_a_panic() {
     // Found by fuzzing: tobj 4.0.5 unwraps three values for Ka/Kd/Ks/Ke and panicked on `Kd 4`.
     let obj = b"mtllib m.mtl\nusemtl lamp\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
     let mtl = b"newmtl lamp\nKe 4 4 4\nKd 4\n".to_vec();
-    let (b, warnings) =
-        parse_obj(obj, Path::new("short.obj"), &|_| Some(mtl.clone())).unwrap_or_else(|e| panic!("{e}"));
+    let (b, warnings) = parse_obj(obj, Path::new("short.obj"), &|_| Ok(mtl.clone())).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(b.num_triangles(), 1);
     assert!(
         warnings.iter().any(|w| w.contains("material library m.mtl: line 3: Kd needs 3 values, found 1")),

@@ -14,7 +14,7 @@ fuzz_target!(|data: &[u8]| {
         Some(i) => (&data[..i], Some(data[i + SPLIT.len()..].to_vec())),
         None => (data, None),
     };
-    match parse_obj(obj, Path::new("fuzz.obj"), &|_| mtl.clone()) {
+    match parse_obj(obj, Path::new("fuzz.obj"), &|_| mtl.clone().ok_or_else(|| "no #MTL part".to_string())) {
         Ok((builder, _)) => {
             raypack_fuzz::commit_and_trace(builder);
         }

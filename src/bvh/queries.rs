@@ -56,8 +56,8 @@ impl<T: TriBlock, C: Counter> IsaOp for Intersect1<'_, T, C> {
     fn run<I: IsaLanes>(self) -> Hit {
         let mut hit = Hit::MISS;
         if self.ray.is_valid() {
-            let (r, root, mut tfar) = (Ray1::<I::F8>::new(self.ray), self.bvh.root(), self.ray.tfar);
-            with_kernel!(self.bvh.test, P => self.bvh.intersect1_from::<I, P, C>(&r, root, &mut tfar, &mut hit, self.counter));
+            let (bvh, r, mut tfar) = (self.bvh.slices(), Ray1::<I::F8>::new(self.ray), self.ray.tfar);
+            with_kernel!(bvh.test, P => bvh.intersect1_from::<I, P, C>(&r, bvh.root(), &mut tfar, &mut hit, self.counter));
         }
         hit
     }
@@ -74,8 +74,8 @@ impl<T: TriBlock, C: Counter> IsaOp for Occluded1<'_, T, C> {
     #[inline(always)]
     fn run<I: IsaLanes>(self) -> bool {
         self.ray.is_valid() && {
-            let r = Ray1::<I::F8>::new(self.ray);
-            with_kernel!(self.bvh.test, P => self.bvh.occluded1_from::<I, P, C>(&r, self.bvh.root(), self.counter))
+            let (bvh, r) = (self.bvh.slices(), Ray1::<I::F8>::new(self.ray));
+            with_kernel!(bvh.test, P => bvh.occluded1_from::<I, P, C>(&r, bvh.root(), self.counter))
         }
     }
 }
@@ -93,7 +93,8 @@ impl<T: TriBlock, R: RayPacket, C: Counter> IsaOp for IntersectPacket<'_, T, R, 
     fn run<I: IsaLanes>(self) {
         let (org, dir, tnear, tfar) = self.packet.ray_rows();
         let mut rays = PacketRays::<R::Lanes<I>>::from_rows(org, dir, tnear, tfar, self.valid);
-        with_kernel!(self.bvh.test, P => intersect_hybrid::<_, I, T, P, C>(self.bvh, &mut rays, HYBRID_THRESHOLD, self.counter));
+        let bvh = self.bvh.slices();
+        with_kernel!(bvh.test, P => intersect_hybrid::<_, I, T, P, C>(&bvh, &mut rays, HYBRID_THRESHOLD, self.counter));
         for i in crate::simd::bits(self.valid & ((1u32 << R::K) - 1)) {
             self.packet.set_result(i, &rays.hit(i));
         }
@@ -114,7 +115,8 @@ impl<T: TriBlock, R: RayPacket, C: Counter> IsaOp for OccludedPacket<'_, T, R, C
         let (org, dir, tnear, tfar) = self.packet.ray_rows();
         let rays = PacketRays::<R::Lanes<I>>::from_rows(org, dir, tnear, tfar, self.valid);
         let mut cache = OccluderCache::default();
-        with_kernel!(self.bvh.test, P => occluded_hybrid::<_, I, T, P, C>(self.bvh, &rays, HYBRID_THRESHOLD, &mut cache, self.counter))
+        let bvh = self.bvh.slices();
+        with_kernel!(bvh.test, P => occluded_hybrid::<_, I, T, P, C>(&bvh, &rays, HYBRID_THRESHOLD, &mut cache, self.counter))
     }
 }
 
@@ -129,14 +131,14 @@ impl<T: TriBlock, C: Counter> IsaOp for IntersectStream<'_, T, C> {
     type Output = ();
     #[inline(always)]
     fn run<I: IsaLanes>(self) {
-        type V<I> = <I as IsaLanes>::F16;
+        type V<I> = <I as IsaLanes>::Stream;
         let k = V::<I>::LANES;
-        let (bvh, rays) = (self.bvh, self.rays);
+        let (bvh, rays) = (self.bvh.slices(), self.rays);
         with_kernel!(bvh.test, P => {
             for (n, (r, h)) in rays.chunks(k).zip(self.hits.chunks_mut(k)).enumerate() {
                 prefetch_rays(rays, (n + 2) * k, k);
                 let mut p = PacketRays::<V<I>>::new_in::<I::F8>(r, u32::MAX);
-                intersect_hybrid::<_, I, T, P, C>(bvh, &mut p, HYBRID_THRESHOLD, self.counter);
+                intersect_hybrid::<_, I, T, P, C>(&bvh, &mut p, HYBRID_THRESHOLD, self.counter);
                 let (mut t, mut u, mut v, mut prim) = ([0.0f32; 16], [0.0f32; 16], [0.0f32; 16], [0u32; 16]);
                 p.store_hits(&mut t, &mut u, &mut v, &mut prim);
                 for (i, out) in h.iter_mut().enumerate() {
@@ -159,15 +161,15 @@ impl<T: TriBlock, C: Counter> IsaOp for OccludedStream<'_, T, C> {
     type Output = ();
     #[inline(always)]
     fn run<I: IsaLanes>(self) {
-        type V<I> = <I as IsaLanes>::F16;
+        type V<I> = <I as IsaLanes>::Stream;
         let k = V::<I>::LANES;
-        let (bvh, rays) = (self.bvh, self.rays);
+        let (bvh, rays) = (self.bvh.slices(), self.rays);
         let mut cache = OccluderCache::default();
         with_kernel!(bvh.test, P => {
             for (n, (r, o)) in rays.chunks(k).zip(self.occluded.chunks_mut(k)).enumerate() {
                 prefetch_rays(rays, (n + 2) * k, k);
                 let p = PacketRays::<V<I>>::new_in::<I::F8>(r, u32::MAX);
-                let bits = occluded_hybrid::<_, I, T, P, C>(bvh, &p, HYBRID_THRESHOLD, &mut cache, self.counter);
+                let bits = occluded_hybrid::<_, I, T, P, C>(&bvh, &p, HYBRID_THRESHOLD, &mut cache, self.counter);
                 for (i, x) in o.iter_mut().enumerate() {
                     *x = bits >> i & 1 != 0;
                 }

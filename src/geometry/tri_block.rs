@@ -40,7 +40,8 @@ use crate::simd::{IsaLanes, Lanes, Vec3x};
 /// the reference's exact tests applied. The slack exceeds the two roundings that separate
 /// `u = U * (1/det)` from `U / det` (and the one of `U + V`), so the filter never rejects a
 /// lane the exact test would accept; lanes whose `|det|` is below 2^-100 (where `u` could
-/// round to `-0.0`) or whose `U, V, T` are not finite always pass it.
+/// round to `-0.0`) or whose `T` is not finite always pass it (a non-finite `U` or `V` fails the
+/// exact test as well).
 #[inline(always)]
 pub fn moller_trumbore<V: Lanes>(
     origin: &Vec3x<V>,
@@ -57,16 +58,17 @@ pub fn moller_trumbore<V: Lanes>(
     let one = V::splat(1.0);
     let p = dir.cross(*e2);
     let det = e1.dot(p);
-    let det_ok = !det.eq(zero) & det.is_finite();
+    let sign = det & V::splat(-0.0); // the sign bit of det
+    let a = det ^ sign; // |det|
+    let det_ok = a.gt(zero) & a.lt(V::splat(f32::INFINITY)); // non-zero and finite (NaN fails)
     let s = *origin - *v0;
     let uu = s.dot(p);
     let q = s.cross(*e1);
     let vv = dir.dot(q);
     let tt = e2.dot(q);
-    // Division-free necessary conditions (see above).
-    let sign = one.copysign(det);
-    let a = det & !V::splat(-0.0);
-    let (u1, v1, t1) = (uu * sign, vv * sign, tt * sign);
+    // Division-free necessary conditions (see above), on U, V, T times the sign of det (a
+    // flip of the sign bit: exact).
+    let (u1, v1, t1) = (uu ^ sign, vv ^ sign, tt ^ sign);
     let lo = -(a * V::splat(SLACK));
     let hi = a * V::splat(1.0 + SLACK);
     let maybe = u1.ge(lo)
@@ -75,7 +77,9 @@ pub fn moller_trumbore<V: Lanes>(
         & (u1 + v1).le(hi)
         & t1.gt(tnear * a * V::splat(1.0 - SLACK))
         & t1.le(tfar * a * V::splat(1.0 + SLACK));
-    let doubtful = a.lt(V::splat(TINY_DET)) | !(uu.is_finite() & vv.is_finite() & tt.is_finite());
+    // A non-finite U or V fails the exact test too (u or v is then infinite or NaN), so only
+    // T needs the exact path when it is not finite (its f64 redo below).
+    let doubtful = a.lt(V::splat(TINY_DET)) | !tt.is_finite();
     if (det_ok & (maybe | doubtful)).bitmask() == 0 {
         return (zero, zero, zero, zero);
     }

@@ -88,6 +88,9 @@ pub enum CameraPlacement {
 pub struct DaeOptions {
     /// Where the camera goes.
     pub camera: CameraPlacement,
+    /// At most this many triangles plus spheres after instancing; `None`: only the
+    /// per-byte instancing budget (see [`instancing_budget`]).
+    pub max_primitives: Option<u64>,
 }
 
 /// Deepest node nesting (including `instance_node` indirections) accepted: deeper files are
@@ -95,13 +98,22 @@ pub struct DaeOptions {
 pub const MAX_NODE_DEPTH: usize = 256;
 
 /// What instancing may expand a document to, in node visits plus instanced vertices,
-/// triangles and spheres: `max(MIN_INSTANCING_BUDGET, INSTANCING_BUDGET_PER_BYTE × file size)`.
-/// `instance_node` and `instance_geometry` multiply: 30 nested nodes that each instance the
-/// next twice are 2³⁰ copies from a 2 kB file. Without a cap such a file takes hours and all
-/// memory; with it, an error names the element where the budget ran out.
+/// triangles and spheres: `max(MIN_INSTANCING_BUDGET, INSTANCING_BUDGET_PER_BYTE × file size)`,
+/// or [`BUDGET_PER_ALLOWED_PRIMITIVE`] units per primitive when that is more and
+/// [`DaeOptions::max_primitives`] is set. `instance_node` and `instance_geometry` multiply: 30
+/// nested nodes that each instance the next twice are 2³⁰ copies from a 2 kB file. Without a
+/// cap such a file takes hours and all memory; with it, an error names the element where the
+/// budget ran out. A legitimate file may still expand a lot (a 292 KB file to 11.4 M
+/// triangles, 1.3 GB once built): the loader's warnings report every expansion.
 pub const INSTANCING_BUDGET_PER_BYTE: usize = 64;
 /// The smallest instancing budget (see [`INSTANCING_BUDGET_PER_BYTE`]).
 pub const MIN_INSTANCING_BUDGET: usize = 1 << 20;
+/// Instancing that adds at least this many primitives to those the file defines is reported
+/// in a warning (how many geometries, how many primitives, by what factor).
+pub const REPORTED_EXPANSION: u64 = 1 << 20;
+/// Instancing budget units per primitive that [`DaeOptions::max_primitives`] allows: room for
+/// a triangle soup's three vertices and the triangle itself.
+pub const BUDGET_PER_ALLOWED_PRIMITIVE: usize = 4;
 
 /// Parses a COLLADA document. `path` only names the file in errors. Returns the scene and
 /// warnings about what was skipped.
@@ -134,8 +146,11 @@ pub fn parse_dae(text: &str, path: &Path, opts: &DaeOptions) -> Result<(SceneBui
         meshes: HashMap::new(),
         camera: None,
         visiting: Vec::new(),
-        budget: instancing_budget(text.len()),
+        budget: budget_of(text.len(), opts.max_primitives),
         file_len: text.len(),
+        max_primitives: opts.max_primitives,
+        primitives: 0,
+        defined: HashMap::new(),
     };
 
     let up = cx.up_axis(root)?;
@@ -154,6 +169,17 @@ pub fn parse_dae(text: &str, path: &Path, opts: &DaeOptions) -> Result<(SceneBui
     };
     for node in children(scene, "node") {
         cx.visit_node(node, up, 1)?;
+    }
+    let defined: usize = cx.defined.values().sum();
+    if cx.primitives >= (defined as u64).saturating_add(REPORTED_EXPANSION) {
+        let note = format!(
+            "instancing expands the {defined} primitives of {} instanced geometries to {} triangles and spheres \
+             ({:.1}x; --max-primitives caps the expansion)",
+            cx.defined.len(),
+            cx.primitives,
+            cx.primitives as f64 / defined.max(1) as f64
+        );
+        cx.warnings.push(note);
     }
 
     if let Some(cam) = cx.camera.take() {
@@ -246,11 +272,24 @@ struct Ctx<'a, 'input> {
     budget: usize,
     /// The document's length in bytes.
     file_len: usize,
+    /// [`DaeOptions::max_primitives`].
+    max_primitives: Option<u64>,
+    /// Triangles and spheres added so far (every instance counted).
+    primitives: u64,
+    /// Triangles (or the one sphere) of each geometry instanced at least once, counted once.
+    defined: HashMap<roxmltree::NodeId, usize>,
 }
 
 /// The instancing budget of a document of `len` bytes (see [`INSTANCING_BUDGET_PER_BYTE`]).
 pub fn instancing_budget(len: usize) -> usize {
     MIN_INSTANCING_BUDGET.max(INSTANCING_BUDGET_PER_BYTE.saturating_mul(len))
+}
+
+/// The budget of a document of `len` bytes when at most `max_primitives` may be instanced.
+fn budget_of(len: usize, max_primitives: Option<u64>) -> usize {
+    let allowed = max_primitives
+        .map_or(0, |n| usize::try_from(n).unwrap_or(usize::MAX).saturating_mul(BUDGET_PER_ALLOWED_PRIMITIVE));
+    instancing_budget(len).max(allowed)
 }
 
 fn children<'a, 'i>(n: Node<'a, 'i>, tag: &'static str) -> impl Iterator<Item = Node<'a, 'i>> {
@@ -462,11 +501,29 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 at,
                 format!(
                     "instancing expands the scene past {} node visits, vertices, triangles and spheres (the cap for \
-                     a file of {} bytes: {INSTANCING_BUDGET_PER_BYTE} per byte, at least {MIN_INSTANCING_BUDGET})",
-                    instancing_budget(self.file_len),
+                     a file of {} bytes: {INSTANCING_BUDGET_PER_BYTE} per byte, at least {MIN_INSTANCING_BUDGET}, \
+                     or {BUDGET_PER_ALLOWED_PRIMITIVE} per primitive --max-primitives allows)",
+                    budget_of(self.file_len, self.max_primitives),
                     self.file_len
                 ),
             )),
+        }
+    }
+
+    /// Counts `count` more primitives of geometry `geom` instanced at `at`, or fails when
+    /// that passes [`DaeOptions::max_primitives`].
+    fn add_primitives(&mut self, at: Node, geom: Node, count: usize) -> Result<(), LoadError> {
+        self.defined.insert(geom.id(), count);
+        self.primitives = self.primitives.saturating_add(count as u64);
+        match self.max_primitives {
+            Some(max) if self.primitives > max => Err(self.err(
+                at,
+                format!(
+                    "this instance brings the scene to {} triangles and spheres, more than --max-primitives {max}",
+                    self.primitives
+                ),
+            )),
+            _ => Ok(()),
         }
     }
 
@@ -530,8 +587,9 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     p
                 }
             };
-            let size = parsed.positions.len() + parsed.groups.iter().map(|(_, t)| t.len()).sum::<usize>();
-            self.charge(ig, size)?;
+            let triangles = parsed.groups.iter().map(|(_, t)| t.len()).sum::<usize>();
+            self.charge(ig, parsed.positions.len() + triangles)?;
+            self.add_primitives(ig, geom, triangles)?;
             let positions: Vec<Vec3> = parsed.positions.iter().map(|&p| project(world, p)).collect();
             let all: Vec<[u32; 3]> = parsed.groups.iter().flat_map(|(_, t)| t.iter().copied()).collect();
             let normals = vertex_normals(&positions, &all);
@@ -555,6 +613,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
         match radius {
             Some(r) => {
                 self.charge(ig, 1)?;
+                self.add_primitives(ig, geom, 1)?;
                 let radius = self.number(r?)?;
                 let center = project(world, Vec3::ZERO);
                 let scale = (*world * Vec4::X).truncate().length();
@@ -706,6 +765,21 @@ impl<'a, 'i> Ctx<'a, 'i> {
             c.parse().map_err(|_| self.err(prim, format!("count {c:?} is not a whole number")))
         };
         let mut tris = Vec::new();
+        // Indices past the last polygon: the count, `<vcount>` and `<p>` disagree.
+        let surplus = |p: Node, idx: &[u32], corners: usize| -> Result<(), LoadError> {
+            let used = corners.saturating_mul(stride);
+            if idx.len() > used {
+                return Err(self.err(
+                    p,
+                    format!(
+                        "has {} indices but the polygons use only {used} ({corners} corners, {stride} inputs per \
+                         corner): the polygon count or sizes disagree with <p>",
+                        idx.len()
+                    ),
+                ));
+            }
+            Ok(())
+        };
         let mut emit =
             |p: Node, idx: &[u32], sizes: &mut dyn Iterator<Item = usize>, fan: bool| -> Result<(), LoadError> {
                 let need = |corners: usize| corners.saturating_mul(stride);
@@ -758,20 +832,23 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 let p = p?;
                 let idx = self.indices(p)?;
                 emit(p, &idx, &mut std::iter::repeat_n(3, n), true)?;
+                surplus(p, &idx, n.saturating_mul(3))?;
             }
             "polylist" => {
                 let n = count("polygons")?;
                 let vc = self.required(prim, "vcount")?;
                 let sizes = self.indices(vc)?;
-                if sizes.len() < n {
+                if sizes.len() != n {
                     return Err(self.err(vc, format!("{} polygon sizes for count {n}", sizes.len())));
                 }
-                if n == 0 {
+                let p = child(prim, "p");
+                if n == 0 && p.is_none() {
                     return Ok(tris);
                 }
                 let p = self.required(prim, "p")?;
                 let idx = self.indices(p)?;
-                emit(p, &idx, &mut sizes[..n].iter().map(|&s| s as usize), true)?;
+                emit(p, &idx, &mut sizes.iter().map(|&s| s as usize), true)?;
+                surplus(p, &idx, sizes.iter().fold(0usize, |a, &s| a.saturating_add(s as usize)))?;
             }
             "polygons" | "trifans" | "tristrips" => {
                 for p in children(prim, "p") {
@@ -802,6 +879,8 @@ impl<'a, 'i> Ctx<'a, 'i> {
         let name = m.attribute("name").or(m.attribute("id")).unwrap_or("");
         let mut albedo = Vec3::splat(0.5);
         let mut emission = Vec3::ZERO;
+        // The elements that set the BSDF and the emission, for errors about their values.
+        let (mut bsdf_at, mut emission_at) = (effect, effect);
         if let Some(profile) = child(effect, "profile_COMMON") {
             let technique = children(profile, "technique")
                 .find(|t| t.attribute("sid") == Some("common"))
@@ -812,9 +891,11 @@ impl<'a, 'i> Ctx<'a, 'i> {
             if let Some(s) = shading {
                 if let Some(c) = child(s, "diffuse").and_then(|d| child(d, "color")) {
                     albedo = self.rgb(c)?;
+                    bsdf_at = c;
                 }
                 if let Some(c) = child(s, "emission").and_then(|d| child(d, "color")) {
                     emission = self.rgb(c)?;
+                    emission_at = c;
                 }
             }
         }
@@ -824,9 +905,14 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 let rgb_of = |tag: &'static str| -> Result<Vec3, LoadError> { self.rgb(self.required(e, tag)?) };
                 let opt_rgb = |tag: &'static str, d: Vec3| child(e, tag).map_or(Ok(d), |c| self.rgb(c));
                 let opt_num = |tag: &'static str, d: f32| child(e, tag).map_or(Ok(d), |c| self.number(c));
-                match e.tag_name().name() {
+                let model = e.tag_name().name();
+                if matches!(model, "emission" | "mirror" | "glass" | "refraction" | "microfacet" | "diffuse") {
+                    bsdf_at = e;
+                }
+                match model {
                     "emission" => {
                         emission = rgb_of("radiance")?;
+                        emission_at = e;
                         bsdf = Bsdf::Diffuse { albedo: Vec3::ZERO };
                     }
                     "mirror" => bsdf = Bsdf::Mirror { reflectance: rgb_of("reflectance")? },
@@ -866,11 +952,8 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 }
             }
         }
-        if let Bsdf::Glass { ior, .. } = bsdf {
-            if ior <= 0.0 {
-                return Err(self.err(effect, format!("index of refraction {ior} must be positive")));
-            }
-        }
+        bsdf.check().map_err(|m| self.err(bsdf_at, m))?;
+        crate::scene::material::check_radiance("emission", emission).map_err(|m| self.err(emission_at, m))?;
         let id = self.builder.add_material(Material { name: name.to_string(), bsdf, emission });
         self.materials.insert(key, id);
         Ok(id)
@@ -894,7 +977,8 @@ impl<'a, 'i> Ctx<'a, 'i> {
             self.warn(technique, "empty technique; light skipped");
             return Ok(());
         };
-        let color = self.rgb(self.required(kind, "color")?)?;
+        let color_node = self.required(kind, "color")?;
+        let color = self.rgb(color_node)?;
         let l = Mat3::from_mat4(*world);
         let position = project(world, Vec3::ZERO);
         let forward = (l * -Vec3::Z).normalize_or(-Vec3::Y);
@@ -925,6 +1009,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 return Ok(());
             }
         };
+        light.check().map_err(|m| self.err(color_node, m))?;
         self.builder.add_light(light);
         Ok(())
     }
@@ -1094,7 +1179,7 @@ mod tests {
         assert!((c.position - Vec3::new(0.0, 0.0, 1.5 * 8f32.sqrt())).length() < 1e-5, "{}", c.position);
         // As authored: the file's eye.
         let text = doc(&lib("<xfov>50</xfov><yfov>40</yfov>"), nodes);
-        let opts = DaeOptions { camera: CameraPlacement::AsAuthored };
+        let opts = DaeOptions { camera: CameraPlacement::AsAuthored, ..DaeOptions::default() };
         let (b, _) = parse_dae(&text, Path::new("t.dae"), &opts).unwrap();
         assert_eq!(b.camera().unwrap().position, Vec3::new(0.0, 0.0, 10.0));
         // Neither yfov nor aspect: CS184 rejects it too.

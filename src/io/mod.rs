@@ -12,11 +12,14 @@
 pub mod camera_file;
 pub mod dae;
 pub mod error;
+pub mod input;
 pub mod obj;
+pub mod output;
 pub mod ply;
 
 pub use dae::{CameraPlacement, DaeOptions};
 pub use error::LoadError;
+pub use input::MAX_MTL_BYTES;
 
 use crate::math::{Aabb, Vec3};
 use crate::scene::{Camera, Light, Material, SceneBuilder};
@@ -48,6 +51,8 @@ impl SceneFormat {
 
 /// Loads a scene file, choosing the format by extension (`.dae`, `.obj`, `.ply`), and prints
 /// the loader's warnings to stderr. Adds [`default_light_rig`] when the file has no lights.
+/// (A convenience for examples and benchmarks; programs that report warnings their own way
+/// call [`load_scene_with_options`].)
 pub fn load_scene(path: &Path) -> Result<SceneBuilder, LoadError> {
     let (builder, warnings) = load_scene_with_warnings(path)?;
     for w in warnings {
@@ -58,30 +63,38 @@ pub fn load_scene(path: &Path) -> Result<SceneBuilder, LoadError> {
 
 /// [`load_scene`] without printing: returns the warnings (each naming the file).
 pub fn load_scene_with_warnings(path: &Path) -> Result<(SceneBuilder, Vec<String>), LoadError> {
-    let format =
-        SceneFormat::from_path(path).ok_or_else(|| LoadError::UnsupportedFormat { path: path.to_path_buf() })?;
-    let bytes = std::fs::read(path).map_err(|source| LoadError::Io { path: path.to_path_buf(), source })?;
-    let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
-    let read_mtl = move |p: &Path| read_material_library(&dir.join(p));
-    load_with(&bytes, format, path, &read_mtl)
+    load_scene_with_options(path, &LoadOptions::default())
 }
 
-/// Material libraries larger than this are not read (real ones are kilobytes).
-pub const MAX_MTL_BYTES: u64 = 64 << 20;
+/// What a loader may let a file make it do, beyond being well-formed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LoadOptions {
+    /// At most this many primitives (triangles plus spheres, after triangulation and
+    /// instancing) in any format; `None`: no cap but COLLADA's instancing budget
+    /// ([`dae::INSTANCING_BUDGET_PER_BYTE`]). The CLI's `--max-primitives`.
+    pub max_primitives: Option<u64>,
+}
+
+/// [`load_scene_with_warnings`] with limits. The file is read only if it is a regular file
+/// of at most [`input::MAX_SCENE_BYTES`] (a FIFO or `/dev/zero` is an error, not a hang).
+pub fn load_scene_with_options(path: &Path, opts: &LoadOptions) -> Result<(SceneBuilder, Vec<String>), LoadError> {
+    let format =
+        SceneFormat::from_path(path).ok_or_else(|| LoadError::UnsupportedFormat { path: path.to_path_buf() })?;
+    let bytes = input::read_regular(path, input::MAX_SCENE_BYTES, "scene files")
+        .map_err(|source| LoadError::Io { path: path.to_path_buf(), source })?;
+    let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let read_mtl = move |p: &Path| read_material_library(&dir.join(p));
+    load_with(&bytes, format, path, &read_mtl, opts)
+}
 
 /// An OBJ's material library, if it is a regular file of at most [`MAX_MTL_BYTES`]: an OBJ
-/// naming `mtllib /dev/zero` or a FIFO must not make the loader read forever.
-fn read_material_library(path: &Path) -> Option<Vec<u8>> {
-    use std::io::Read;
-    // Checked before opening: opening a FIFO blocks until someone writes to it.
-    let meta = std::fs::metadata(path).ok()?;
-    if !meta.is_file() || meta.len() > MAX_MTL_BYTES {
-        return None;
-    }
-    let file = std::fs::File::open(path).ok()?;
-    let mut bytes = Vec::with_capacity(meta.len() as usize);
-    file.take(MAX_MTL_BYTES).read_to_end(&mut bytes).ok()?;
-    Some(bytes)
+/// naming `mtllib /dev/zero` or a FIFO must not make the loader read forever. The error says
+/// why not, for the warning.
+fn read_material_library(path: &Path) -> Result<Vec<u8>, String> {
+    input::read_regular(path, MAX_MTL_BYTES, "material libraries").map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => "not found".to_string(),
+        _ => e.to_string(),
+    })
 }
 
 /// Loads a scene held in memory (for tests and fuzzing). `name` only names it in errors;
@@ -91,24 +104,43 @@ pub fn load_scene_from_bytes(
     format: SceneFormat,
     name: &Path,
 ) -> Result<(SceneBuilder, Vec<String>), LoadError> {
-    load_with(bytes, format, name, &|_| None)
+    load_scene_from_bytes_with_options(bytes, format, name, &LoadOptions::default())
+}
+
+/// [`load_scene_from_bytes`] with limits.
+pub fn load_scene_from_bytes_with_options(
+    bytes: &[u8],
+    format: SceneFormat,
+    name: &Path,
+    opts: &LoadOptions,
+) -> Result<(SceneBuilder, Vec<String>), LoadError> {
+    load_with(bytes, format, name, &|_| Err("not looked up for a scene held in memory".into()), opts)
 }
 
 fn load_with(
     bytes: &[u8],
     format: SceneFormat,
     path: &Path,
-    read_mtl: &dyn Fn(&Path) -> Option<Vec<u8>>,
+    read_mtl: &dyn Fn(&Path) -> Result<Vec<u8>, String>,
+    opts: &LoadOptions,
 ) -> Result<(SceneBuilder, Vec<String>), LoadError> {
     let (mut builder, warnings) = match format {
         SceneFormat::Dae => {
             let text = std::str::from_utf8(bytes)
                 .map_err(|e| LoadError::parse(path, format!("byte {}", e.valid_up_to()), "not UTF-8 text"))?;
-            dae::parse_dae(text, path, &DaeOptions::default())?
+            let dae_opts = DaeOptions { max_primitives: opts.max_primitives, ..DaeOptions::default() };
+            dae::parse_dae(text, path, &dae_opts)?
         }
-        SceneFormat::Obj => obj::parse_obj(bytes, path, read_mtl)?,
+        SceneFormat::Obj => obj::parse_obj_with_limit(bytes, path, read_mtl, opts.max_primitives)?,
         SceneFormat::Ply => {
             let mesh = ply::parse_ply(bytes, path)?;
+            if let Some(max) = opts.max_primitives.filter(|&max| mesh.triangles.len() as u64 > max) {
+                return Err(LoadError::parse(
+                    path,
+                    "element face",
+                    format!("{} triangles, more than --max-primitives {max}", mesh.triangles.len()),
+                ));
+            }
             let mut b = SceneBuilder::new();
             let m = b.add_material(Material::default());
             let normals = vertex_normals(&mesh.positions, &mesh.triangles);

@@ -1,7 +1,10 @@
 //! Wavefront OBJ through the `tobj` crate: polygons triangulated (fans), one index per
 //! `v/vt/vn` corner, materials from the MTL libraries named by `mtllib` (diffuse `Kd` →
 //! Lambertian albedo, emission `Ke` → emitted radiance). A missing or broken MTL file is a
-//! warning, not an error: the meshes keep the default grey material.
+//! warning, not an error: the meshes keep the default grey material. So are the other
+//! substitutions, each said in a warning: a `Kd` outside `[0, 1]` or a negative `Ke` is
+//! clamped, a `usemtl` naming no material takes the default one, and polylines (`l`), which
+//! have no surface, are skipped (`tobj` would read them as faces).
 //!
 //! `tobj` reports what went wrong but not where; on an error this module scans the text once
 //! more to find the first line that shows the problem, so the error names the line.
@@ -16,30 +19,51 @@ use crate::scene::{Material, MaterialId, SceneBuilder};
 use std::path::Path;
 
 /// Parses OBJ text. MTL libraries are looked up beside `path` through `read_mtl`, which
-/// returns the library's bytes (or `None` when it cannot be read).
+/// returns the library's bytes or why it cannot be read.
 pub fn parse_obj(
     bytes: &[u8],
     path: &Path,
-    read_mtl: &dyn Fn(&Path) -> Option<Vec<u8>>,
+    read_mtl: &dyn Fn(&Path) -> Result<Vec<u8>, String>,
 ) -> Result<(SceneBuilder, Vec<String>), LoadError> {
-    check_faces(bytes, path)?;
-    let opts = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
+    parse_obj_with_limit(bytes, path, read_mtl, None)
+}
+
+/// [`parse_obj`] that fails, naming the line, once the faces make more than `max_triangles`
+/// triangles (checked before anything is allocated for them).
+pub fn parse_obj_with_limit(
+    bytes: &[u8],
+    path: &Path,
+    read_mtl: &dyn Fn(&Path) -> Result<Vec<u8>, String>,
+    max_triangles: Option<u64>,
+) -> Result<(SceneBuilder, Vec<String>), LoadError> {
+    let scan = check_faces(bytes, path, max_triangles)?;
     let mut warnings = Vec::new();
+    // Polylines have no surface: blanked (line numbers kept) so that tobj does not fill them.
+    let without_lines;
+    let bytes = match scan.polylines.first() {
+        None => bytes,
+        Some(&first) => {
+            warnings.push(format!(
+                "{} polylines (`l` statements, the first at line {first}) skipped: lines have no surface to render",
+                scan.polylines.len()
+            ));
+            without_lines = blank_lines(bytes, &scan.polylines);
+            &without_lines[..]
+        }
+    };
+    let opts = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     let mtl_notes = std::cell::RefCell::new(Vec::new());
     let mut reader = std::io::Cursor::new(bytes);
     let result = tobj::load_obj_buf(&mut reader, &opts, |mtl_path| match read_mtl(mtl_path) {
-        Some(data) => match check_mtl(&data) {
+        Ok(data) => match check_mtl(&data) {
             Ok(()) => tobj::load_mtl_buf(&mut std::io::Cursor::new(data)),
             Err(problem) => {
                 mtl_notes.borrow_mut().push(format!("material library {}: {problem}", mtl_path.display()));
                 Err(tobj::LoadError::MaterialParseError)
             }
         },
-        None => {
-            mtl_notes.borrow_mut().push(format!(
-                "material library {} not found (or not a regular file of at most 64 MiB)",
-                mtl_path.display()
-            ));
+        Err(why) => {
+            mtl_notes.borrow_mut().push(format!("material library {}: {why}", mtl_path.display()));
             Err(tobj::LoadError::OpenFileFailed)
         }
     });
@@ -48,12 +72,25 @@ pub fn parse_obj(
     for m in &mtl_notes {
         warnings.push(format!("{m}; using the default material"));
     }
+    let libraries_read = materials.is_ok();
     let materials = materials.unwrap_or_else(|e| {
         if mtl_notes.is_empty() {
             warnings.push(format!("material library unreadable ({e}); using the default material"));
         }
         Vec::new()
     });
+    if libraries_read {
+        // (When a library could not be read, its warning already says what every `usemtl` gets.)
+        let mut reported = std::collections::HashSet::new();
+        for (line, name) in &scan.usemtl {
+            if !materials.iter().any(|m| &m.name == name) && reported.insert(name) {
+                warnings.push(format!(
+                    "line {line}: usemtl {name:?}: no material of that name in the material libraries; using the \
+                     default material"
+                ));
+            }
+        }
+    }
 
     let mut b = SceneBuilder::new();
     let default = b.add_material(Material::default());
@@ -62,8 +99,21 @@ pub fn parse_obj(
         .map(|m| {
             let kd = m.diffuse.map(Vec3::from_array).unwrap_or(Vec3::splat(0.5));
             let ke = m.emissive.map(Vec3::from_array).unwrap_or(Vec3::ZERO);
-            let mut mat = Material::diffuse(kd.clamp(Vec3::ZERO, Vec3::ONE)).named(&m.name);
-            mat.emission = ke.max(Vec3::ZERO);
+            let (albedo, emission) = (kd.clamp(Vec3::ZERO, Vec3::ONE), ke.max(Vec3::ZERO));
+            if albedo != kd {
+                warnings.push(format!(
+                    "material {:?}: Kd {} {} {} outside [0, 1]; clamped to {} {} {}",
+                    m.name, kd.x, kd.y, kd.z, albedo.x, albedo.y, albedo.z
+                ));
+            }
+            if emission != ke {
+                warnings.push(format!(
+                    "material {:?}: Ke {} {} {} is negative; clamped to {} {} {}",
+                    m.name, ke.x, ke.y, ke.z, emission.x, emission.y, emission.z
+                ));
+            }
+            let mut mat = Material::diffuse(albedo).named(&m.name);
+            mat.emission = emission;
             b.add_material(mat)
         })
         .collect();
@@ -85,21 +135,48 @@ pub fn parse_obj(
     Ok((b, warnings))
 }
 
-/// Finds what `tobj` cannot take in an MTL library: a colour statement (`Ka`, `Kd`, `Ks`,
-/// `Ke`) with fewer than three values makes `tobj` 4.0.5 panic (`parse_float3` unwraps;
-/// found by fuzzing). Returns the first such line and what is wrong with it.
+/// Finds what `tobj` cannot take in an MTL library, or what would make nonsense of it: a
+/// colour statement (`Ka`, `Kd`, `Ks`, `Ke`) with fewer than three values makes `tobj` 4.0.5
+/// panic (`parse_float3` unwraps; found by fuzzing), and one with a NaN or infinite value
+/// would be read as it is. Returns the first such line and what is wrong with it.
 fn check_mtl(bytes: &[u8]) -> Result<(), String> {
     for (i, line) in bytes.split(|&b| b == b'\n').enumerate() {
         let text = String::from_utf8_lossy(line);
         let mut words = text.split_whitespace();
         if let Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")) = words.next() {
-            let n = words.count();
-            if n < 3 {
-                return Err(format!("line {}: {key} needs 3 values, found {n}", i + 1));
+            let values: Vec<&str> = words.collect();
+            if values.len() < 3 {
+                return Err(format!("line {}: {key} needs 3 values, found {}", i + 1, values.len()));
+            }
+            if let Some(v) = values.iter().take(3).find(|v| v.parse::<f32>().is_ok_and(|x| !x.is_finite())) {
+                return Err(format!("line {}: {key} value {v} is not a finite number", i + 1));
             }
         }
     }
     Ok(())
+}
+
+/// `bytes` with the given lines (1-based) emptied, every newline kept.
+fn blank_lines(bytes: &[u8], lines: &[usize]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut blank = lines.iter().peekable();
+    for (i, line) in bytes.split(|&b| b == b'\n').enumerate() {
+        if i > 0 {
+            out.push(b'\n');
+        }
+        if blank.next_if_eq(&&(i + 1)).is_none() {
+            out.extend_from_slice(line);
+        }
+    }
+    out
+}
+
+/// What [`check_faces`] found besides errors.
+struct FaceScan {
+    /// Lines (1-based) of `l` statements.
+    polylines: Vec<usize>,
+    /// `usemtl` statements: line and material name (as `tobj` reads it).
+    usemtl: Vec<(usize, String)>,
 }
 
 /// Checks every `f` and `l` statement before `tobj` sees it: a face needs at least three
@@ -108,8 +185,10 @@ fn check_mtl(bytes: &[u8]) -> Result<(), String> {
 /// exists: `0`, one past the file's count, or a relative (negative) one reaching before the
 /// first element is an error naming the line. `tobj` 4.0.5 turns such indices into `usize`
 /// values near `2⁶⁴` and multiplies them unchecked (a panic with overflow checks on; found by
-/// fuzzing).
-fn check_faces(bytes: &[u8], path: &Path) -> Result<(), LoadError> {
+/// fuzzing). The faces' fan triangles are counted against `max_triangles`.
+fn check_faces(bytes: &[u8], path: &Path, max_triangles: Option<u64>) -> Result<FaceScan, LoadError> {
+    let mut scan = FaceScan { polylines: Vec::new(), usemtl: Vec::new() };
+    let mut triangles = 0u64;
     let lines = || bytes.split(|&b| b == b'\n').map(String::from_utf8_lossy);
     let mut total = [0i64; 3];
     for line in lines() {
@@ -128,6 +207,10 @@ fn check_faces(bytes: &[u8], path: &Path) -> Result<(), LoadError> {
             Some("v") => seen[0] += 1,
             Some("vt") => seen[1] += 1,
             Some("vn") => seen[2] += 1,
+            Some("usemtl") => {
+                let name = line.trim_start().split_once(' ').unwrap_or_default().1.trim();
+                scan.usemtl.push((i + 1, name.to_string()));
+            }
             Some("f") | Some("l") => {
                 let corners: Vec<&str> = words.collect();
                 if keyword == Some("f") && corners.len() < 3 {
@@ -136,6 +219,18 @@ fn check_faces(bytes: &[u8], path: &Path) -> Result<(), LoadError> {
                         i + 1,
                         format!("a face needs at least 3 corners, found {} (truncated file?)", corners.len()),
                     ));
+                }
+                if keyword == Some("l") {
+                    scan.polylines.push(i + 1);
+                } else {
+                    triangles += corners.len() as u64 - 2;
+                    if let Some(max) = max_triangles.filter(|&max| triangles > max) {
+                        return Err(LoadError::at_line(
+                            path,
+                            i + 1,
+                            format!("the faces so far make {triangles} triangles, more than --max-primitives {max}"),
+                        ));
+                    }
                 }
                 for c in corners {
                     for (k, part) in c.split('/').enumerate().take(3) {
@@ -158,7 +253,7 @@ fn check_faces(bytes: &[u8], path: &Path) -> Result<(), LoadError> {
             _ => {}
         }
     }
-    Ok(())
+    Ok(scan)
 }
 
 /// Turns a `tobj` error into one that names the first offending line.

@@ -1,8 +1,8 @@
 //! The film: a width × height buffer of linear radiance, and its atomic output as PNG (8-bit
-//! sRGB, clamped as CS184 does) or OpenEXR (linear 32-bit float).
+//! sRGB, clamped as CS184 does) or OpenEXR (linear 32-bit float) through
+//! [`crate::io::output`].
 
 use crate::math::Vec3;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// A linear RGB image; row 0 is the top row.
@@ -77,67 +77,76 @@ impl Film {
     }
 
     /// Writes the film to `path`: OpenEXR (linear) when it ends in `.exr`, PNG otherwise.
-    /// The file appears whole or not at all.
+    /// The file appears whole or not at all, and only a regular file (or nothing) at `path`
+    /// is replaced ([`crate::io::output`]).
     pub fn write(&self, path: &Path, encoding: Encoding) -> Result<(), ImageError> {
-        let is_exr = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"));
-        if is_exr { self.write_exr(path) } else { write_png(path, self.width, self.height, &self.to_rgb8(encoding)) }
+        let bytes = self
+            .encode(ImageFormat::of(path), encoding)
+            .map_err(|message| ImageError::Encode { path: path.to_path_buf(), message })?;
+        crate::io::output::write_file(path, &bytes).map_err(ImageError::from)
     }
 
-    fn write_exr(&self, path: &Path) -> Result<(), ImageError> {
-        let err = |e: exr::error::Error| ImageError::Encode { path: path.to_path_buf(), message: e.to_string() };
-        write_atomically(path, |file| {
-            let img = exr::prelude::Image::from_channels(
-                (self.width, self.height),
-                exr::prelude::SpecificChannels::rgb(|p: exr::prelude::Vec2<usize>| {
-                    let c = self.pixels[p.1 * self.width + p.0];
-                    (c.x, c.y, c.z)
-                }),
-            );
-            use exr::prelude::WritableImage;
-            let mut buf = std::io::Cursor::new(Vec::new());
-            img.write().to_buffered(&mut buf).map_err(err)?;
-            file.write_all(buf.get_ref()).map_err(|source| ImageError::Io { path: path.to_path_buf(), source })
-        })
+    /// The film as the bytes of a `format` file (PNG encoded with `encoding`; EXR linear).
+    pub fn encode(&self, format: ImageFormat, encoding: Encoding) -> Result<Vec<u8>, String> {
+        match format {
+            ImageFormat::Png => encode_png(self.width, self.height, &self.to_rgb8(encoding)),
+            ImageFormat::Exr => {
+                let img = exr::prelude::Image::from_channels(
+                    (self.width, self.height),
+                    exr::prelude::SpecificChannels::rgb(|p: exr::prelude::Vec2<usize>| {
+                        let c = self.pixels[p.1 * self.width + p.0];
+                        (c.x, c.y, c.z)
+                    }),
+                );
+                use exr::prelude::WritableImage;
+                let mut buf = std::io::Cursor::new(Vec::new());
+                img.write().to_buffered(&mut buf).map_err(|e| e.to_string())?;
+                Ok(buf.into_inner())
+            }
+        }
     }
+}
+
+/// The file formats a film is written in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ImageFormat {
+    /// 8-bit sRGB PNG.
+    Png,
+    /// Linear 32-bit float OpenEXR.
+    Exr,
+}
+
+impl ImageFormat {
+    /// EXR when `path` ends in `.exr` (any case), PNG otherwise.
+    pub fn of(path: &Path) -> Self {
+        if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) { Self::Exr } else { Self::Png }
+    }
+}
+
+impl From<crate::io::output::OutputError> for ImageError {
+    fn from(e: crate::io::output::OutputError) -> Self {
+        ImageError::Io { path: e.path, source: e.source }
+    }
+}
+
+/// 8-bit RGB `rgb` (row-major, top row first) as the bytes of a PNG file.
+pub fn encode_png(width: usize, height: usize, rgb: &[u8]) -> Result<Vec<u8>, String> {
+    let mut out = Vec::new();
+    let mut enc = png::Encoder::new(&mut out, width as u32, height as u32);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+    let mut w = enc.write_header().map_err(|e| e.to_string())?;
+    w.write_image_data(rgb).map_err(|e| e.to_string())?;
+    w.finish().map_err(|e| e.to_string())?;
+    Ok(out)
 }
 
 /// Writes 8-bit RGB `rgb` (row-major, top row first) as a PNG, atomically.
 pub fn write_png(path: &Path, width: usize, height: usize, rgb: &[u8]) -> Result<(), ImageError> {
-    let enc_err = |e: png::EncodingError| ImageError::Encode { path: path.to_path_buf(), message: e.to_string() };
-    write_atomically(path, |file| {
-        let mut enc = png::Encoder::new(std::io::BufWriter::new(file), width as u32, height as u32);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
-        let mut w = enc.write_header().map_err(enc_err)?;
-        w.write_image_data(rgb).map_err(enc_err)?;
-        w.finish().map_err(enc_err)
-    })
-}
-
-/// Runs `write` on a temporary file beside `path` and renames it into place on success; on
-/// failure the temporary file is removed and `path` is untouched.
-pub fn write_atomically(
-    path: &Path,
-    write: impl FnOnce(&mut std::fs::File) -> Result<(), ImageError>,
-) -> Result<(), ImageError> {
-    let io_err = |source| ImageError::Io { path: path.to_path_buf(), source };
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let name = path.file_name().ok_or_else(|| io_err(std::io::Error::other("not a file name")))?;
-    let tmp = dir.join(format!(".{}.tmp{}", name.to_string_lossy(), std::process::id()));
-    let result = (|| {
-        let mut file = std::fs::File::create(&tmp).map_err(io_err)?;
-        write(&mut file)?;
-        file.sync_all().map_err(io_err)?;
-        std::fs::rename(&tmp, path).map_err(io_err)
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+    let bytes =
+        encode_png(width, height, rgb).map_err(|message| ImageError::Encode { path: path.to_path_buf(), message })?;
+    crate::io::output::write_file(path, &bytes).map_err(ImageError::from)
 }
 
 #[cfg(test)]

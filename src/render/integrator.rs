@@ -160,6 +160,11 @@ impl<'a> Integrator<'a> {
         self.hemisphere_samples
     }
 
+    /// True when direct lighting traces uniform hemisphere rays (`-H`) rather than shadow rays.
+    pub fn hemisphere_sampling(&self) -> bool {
+        self.settings.hemisphere_sampling
+    }
+
     /// True when camera rays start paths to [`Integrator::shade`]; false when the camera ray's
     /// hit alone decides ([`Integrator::camera_only`]).
     pub fn traces_paths(&self) -> bool {

@@ -24,11 +24,11 @@ pub mod stats;
 pub mod trace;
 pub mod wavefront;
 
-pub use film::{Encoding, Film, ImageError};
+pub use film::{Encoding, Film, ImageError, ImageFormat};
 pub use integrator::IntegratorKind;
 pub use order::RayOrder;
-pub use stats::{PhaseTimes, RayCounts, RayKind, RayLog};
-pub use wavefront::StreamOrder;
+pub use stats::{RayCounts, RayKind, RayLog};
+pub use wavefront::{PhaseTimes, StreamOrder};
 
 use crate::math::Vec3;
 use crate::ray::Ray;
@@ -119,8 +119,9 @@ pub struct RenderOutput {
     pub stats: RenderStats,
 }
 
-/// Samples per pixel per pass without adaptive sampling (bounds the per-tile buffers).
-const PASS_SAMPLES: u32 = 16;
+/// Samples per pixel per pass: bounds the per-tile buffers, whatever `-s` and the adaptive
+/// batch size (a batch larger than this is taken in several passes).
+pub const PASS_SAMPLES: u32 = 16;
 
 /// Renders `scene` through `camera`. `progress` is called with the number of tiles done
 /// each time a tile completes.
@@ -199,56 +200,65 @@ fn render_tile(
     let tw = x1 - x0;
     let npix = tw * (y1 - y0);
     let spp = settings.samples_per_pixel.max(1);
+    // Convergence is tested after every batch (CS184's samplesPerBatch); a batch is taken in
+    // passes of at most PASS_SAMPLES samples per pixel, so the buffers stay small.
     let batch = match settings.adaptive {
-        Some((b, _)) => b.max(1).min(spp),
-        None => spp.min(PASS_SAMPLES),
+        Some((b, _)) => b.clamp(1, spp),
+        None => spp,
     };
+    let pass = PASS_SAMPLES.min(spp);
     let centre_only = spp == 1;
     let mut pixels = vec![PixelEstimate::default(); npix];
-    // Per-pass buffers, sized for the largest pass (and kept by the worker).
-    let cap = npix * batch as usize;
-    wavefront.reserve(cap, integrator.direct_samples_per_point() as usize);
+    // Per-pass buffers, sized for the largest pass (the wavefront's are kept by the worker).
+    let cap = npix * pass as usize;
+    wavefront.reserve(cap, integrator);
     let mut owner: Vec<u32> = Vec::with_capacity(cap);
     let mut log = RayLog::default();
     let mut phases = PhaseTimes::default();
     let mut invalid = 0u64;
-    loop {
-        let t0 = Instant::now();
-        wavefront.clear();
-        owner.clear();
-        for (i, est) in pixels.iter().enumerate() {
-            if est.done {
-                continue;
+    // Every pixel still sampling has taken `taken` samples: all start together and a batch
+    // adds the same number to each.
+    let mut taken = 0u32;
+    while taken < spp && pixels.iter().any(|p| !p.done) {
+        let batch_end = taken.saturating_add(batch).min(spp);
+        while taken < batch_end {
+            let pass_end = taken.saturating_add(pass).min(batch_end);
+            let t0 = Instant::now();
+            wavefront.clear();
+            owner.clear();
+            for (i, est) in pixels.iter().enumerate() {
+                if est.done {
+                    continue;
+                }
+                let (x, y) = (x0 + i % tw, y0 + i / tw);
+                for s in taken..pass_end {
+                    let mut rng = Rng::new(settings.seed, sample_stream(y * w + x, s));
+                    // One sample goes through the pixel centre; more are jittered uniformly.
+                    let (jx, jy) = if centre_only { (0.5, 0.5) } else { rng.next_2d() };
+                    let ray = camera.ray(x as f32 + jx, y as f32 + jy, w, h);
+                    log.record(RayKind::Camera, &ray);
+                    wavefront.push_camera(ray, rng);
+                    owner.push(i as u32);
+                }
             }
-            let (x, y) = (x0 + i % tw, y0 + i / tw);
-            let first = est.n;
-            for s in first..(first + batch).min(spp) {
-                let mut rng = Rng::new(settings.seed, sample_stream(y * w + x, s));
-                // One sample goes through the pixel centre; more are jittered uniformly.
-                let (jx, jy) = if centre_only { (0.5, 0.5) } else { rng.next_2d() };
-                let ray = camera.ray(x as f32 + jx, y as f32 + jy, w, h);
-                log.record(RayKind::Camera, &ray);
-                wavefront.push_camera(ray, rng);
-                owner.push(i as u32);
+            phases.generate += t0.elapsed();
+            wavefront.run(integrator, order, &mut log, &mut phases);
+            let t1 = Instant::now();
+            for (mut l, &i) in wavefront.radiance().zip(&owner) {
+                if !l.is_finite() {
+                    invalid += 1;
+                    l = Vec3::ZERO;
+                }
+                pixels[i as usize].add(l);
             }
+            taken = pass_end;
+            phases.film += t1.elapsed();
         }
-        if wavefront.is_empty() {
-            break;
-        }
-        phases.generate += t0.elapsed();
-        wavefront.run(integrator, order, &mut log, &mut phases);
-        let t1 = Instant::now();
-        for (mut l, &i) in wavefront.radiance().zip(&owner) {
-            if !l.is_finite() {
-                invalid += 1;
-                l = Vec3::ZERO;
-            }
-            pixels[i as usize].add(l);
-        }
+        let t = Instant::now();
         for est in &mut pixels {
             est.done = est.n >= spp || settings.adaptive.is_some_and(|(_, tol)| est.converged(tol));
         }
-        phases.film += t1.elapsed();
+        phases.film += t.elapsed();
     }
     TileResult { pixels, log, invalid_samples: invalid, phases }
 }

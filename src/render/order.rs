@@ -108,6 +108,11 @@ impl SortScratch {
         self.rays.reserve(n.saturating_sub(self.rays.len()));
     }
 
+    /// Bytes [`SortScratch::reserve`] takes per ray.
+    pub fn bytes_per_ray() -> usize {
+        2 * std::mem::size_of::<u16>() + 2 * std::mem::size_of::<u32>() + std::mem::size_of::<Ray>() + 4
+    }
+
     /// Sorts `rays` and `owner` (same length) together by `order`'s key, stably (an LSD radix
     /// sort on 16-bit keys: one or two counting passes).
     pub fn sort(&mut self, order: RayOrder, bounds: &Aabb, rays: &mut Vec<Ray>, owner: &mut Vec<u32>) {

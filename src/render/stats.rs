@@ -3,7 +3,6 @@
 
 use crate::ray::Ray;
 use crate::scene::Scene;
-use std::time::Duration;
 
 /// The kinds of rays a render traces.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -63,44 +62,6 @@ impl std::ops::AddAssign for RayCounts {
         self.camera += o.camera;
         self.shadow += o.shadow;
         self.bounce += o.bounce;
-    }
-}
-
-/// Thread time of each phase of the wavefront (summed over threads).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct PhaseTimes {
-    /// Generating camera rays (and their paths' random number generators).
-    pub generate: Duration,
-    /// Tracing, by kind of ray (`RayKind as usize`).
-    pub trace: [Duration; 3],
-    /// Shading hits (emission, light and BSDF sampling, Russian roulette) and adding the
-    /// direct lighting their shadow rays found.
-    pub shade: Duration,
-    /// Ordering secondary rays before they are traced.
-    pub sort: Duration,
-    /// Compacting the surviving paths.
-    pub compact: Duration,
-    /// Adding finished samples to their pixels (and adaptive sampling's test).
-    pub film: Duration,
-}
-
-impl PhaseTimes {
-    /// All phases.
-    pub fn total(&self) -> Duration {
-        self.generate + self.trace.iter().sum::<Duration>() + self.shade + self.sort + self.compact + self.film
-    }
-}
-
-impl std::ops::AddAssign for PhaseTimes {
-    fn add_assign(&mut self, o: Self) {
-        self.generate += o.generate;
-        for (a, b) in self.trace.iter_mut().zip(o.trace) {
-            *a += b;
-        }
-        self.shade += o.shade;
-        self.sort += o.sort;
-        self.compact += o.compact;
-        self.film += o.film;
     }
 }
 

@@ -21,7 +21,7 @@ use super::integrator::{Integrator, PathState, Scatter};
 use super::order::{RayOrder, SortScratch};
 use super::queue::{DirectQueue, RayQueue};
 use super::sampler::Rng;
-use super::stats::{PhaseTimes, RayKind, RayLog};
+use super::stats::{RayKind, RayLog};
 use crate::math::Vec3;
 use crate::ray::{Hit, Ray};
 use crate::scene::SurfaceHit;
@@ -69,28 +69,31 @@ impl Wavefront {
         Self::default()
     }
 
-    /// Makes room for batches of `paths` paths with at most `direct` direct-lighting samples
-    /// per shading point, so that tracing them allocates nothing.
-    pub fn reserve(&mut self, paths: usize, direct: usize) {
+    /// Makes room for batches of `paths` paths of `integrator`, so that tracing them
+    /// allocates nothing.
+    pub fn reserve(&mut self, paths: usize, integrator: &Integrator) {
         fn room<T>(v: &mut Vec<T>, n: usize) {
             v.reserve(n.saturating_sub(v.len()));
         }
-        // The shading of a bounce stops to trace its direct lighting past DIRECT_FLUSH samples.
-        let samples = (paths * direct.max(1)).min(DIRECT_FLUSH + direct);
+        let Capacity { paths, wave, samples } = Capacity::of(paths, integrator.direct_samples_per_point() as usize);
         room(&mut self.paths, paths);
-        room(&mut self.alive, paths);
-        room(&mut self.surfaces, paths);
-        room(&mut self.scatter, paths);
-        room(&mut self.direct.points, paths);
+        let c = &mut self.camera;
+        (room(&mut c.rays, paths), room(&mut c.owner, paths), room(&mut c.hits, paths));
+        room(&mut self.alive, wave);
+        room(&mut self.surfaces, wave);
+        room(&mut self.scatter, wave);
+        room(&mut self.direct.points, wave);
         room(&mut self.direct.samples, samples);
-        for (q, n) in [(&mut self.queue, paths), (&mut self.direct.shadow, samples), (&mut self.direct.probes, samples)]
-        {
-            room(&mut q.rays, n);
-            room(&mut q.owner, n);
-            room(&mut q.hits, n);
-            room(&mut q.occluded, n);
+        let q = &mut self.queue;
+        (room(&mut q.rays, wave), room(&mut q.owner, wave), room(&mut q.hits, wave));
+        // Shadow rays (light sampling) or hemisphere rays (`-H`): one kind per render.
+        let s = &mut self.direct.shadow;
+        (room(&mut s.rays, samples), room(&mut s.owner, samples), room(&mut s.occluded, samples));
+        let p = &mut self.direct.probes;
+        if integrator.hemisphere_sampling() {
+            (room(&mut p.rays, samples), room(&mut p.owner, samples), room(&mut p.hits, samples));
         }
-        self.scratch.reserve(samples.max(paths));
+        self.scratch.reserve(samples.max(wave));
     }
 
     /// Starts a new batch.
@@ -273,6 +276,83 @@ impl DirectContext<'_, '_> {
         }
         clock.lap(&mut times.shade);
     }
+}
+
+/// Thread time of each phase of the wavefront (summed over threads).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PhaseTimes {
+    /// Generating camera rays (and their paths' random number generators).
+    pub generate: Duration,
+    /// Tracing, by kind of ray (`RayKind as usize`).
+    pub trace: [Duration; 3],
+    /// Shading hits (emission, light and BSDF sampling, Russian roulette) and adding the
+    /// direct lighting their shadow rays found.
+    pub shade: Duration,
+    /// Ordering secondary rays before they are traced.
+    pub sort: Duration,
+    /// Compacting the surviving paths.
+    pub compact: Duration,
+    /// Adding finished samples to their pixels (and adaptive sampling's test).
+    pub film: Duration,
+}
+
+impl PhaseTimes {
+    /// All phases.
+    pub fn total(&self) -> Duration {
+        self.generate + self.trace.iter().sum::<Duration>() + self.shade + self.sort + self.compact + self.film
+    }
+}
+
+impl std::ops::AddAssign for PhaseTimes {
+    fn add_assign(&mut self, o: Self) {
+        self.generate += o.generate;
+        for (a, b) in self.trace.iter_mut().zip(o.trace) {
+            *a += b;
+        }
+        self.shade += o.shade;
+        self.sort += o.sort;
+        self.compact += o.compact;
+        self.film += o.film;
+    }
+}
+
+/// How many elements a worker's buffers hold.
+struct Capacity {
+    /// Paths of a batch (camera queue, path states).
+    paths: usize,
+    /// Paths of a wave (bounce queue, surfaces, shading points).
+    wave: usize,
+    /// Direct-lighting samples of a wave's bounce before they are traced.
+    samples: usize,
+}
+
+impl Capacity {
+    /// For batches of `paths` paths and at most `direct` direct samples per shading point.
+    fn of(paths: usize, direct: usize) -> Self {
+        let wave = paths.min(WAVE_PATHS);
+        // The shading of a bounce stops to trace its direct lighting past DIRECT_FLUSH samples.
+        let samples = wave.saturating_mul(direct.max(1)).min(DIRECT_FLUSH + direct);
+        Self { paths, wave, samples }
+    }
+}
+
+/// Bytes one worker's [`Wavefront`] holds for batches of `paths` paths with at most `direct`
+/// direct-lighting samples per shading point (light sampling; hemisphere sampling's rays take
+/// as much again).
+pub fn worker_bytes(paths: usize, direct: usize) -> u64 {
+    use std::mem::size_of;
+    let Capacity { paths, wave, samples } = Capacity::of(paths, direct);
+    let ray = size_of::<Ray>() + size_of::<u32>();
+    let per_path = size_of::<PathState>() + ray + size_of::<Hit>();
+    let per_wave = ray
+        + size_of::<Hit>()
+        + size_of::<bool>()
+        + size_of::<SurfaceHit>()
+        + size_of::<Option<Scatter>>()
+        + size_of::<super::queue::DirectPoint>();
+    let per_sample = size_of::<super::queue::DirectSample>() + ray + size_of::<bool>();
+    let sort = SortScratch::bytes_per_ray() * samples.max(wave);
+    (paths * per_path + wave * per_wave + samples * per_sample + sort) as u64
 }
 
 /// Paths advanced together: a wave's queues (rays, hits, surfaces, shadow rays) stay in the

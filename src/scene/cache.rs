@@ -10,8 +10,18 @@
 //! in the mapping ([`crate::bvh::BvhArray`]; the binary BVH, when kept, is copied out) and
 //! checked for the ranges the traversal kernels index with (child and block indices, depth,
 //! primitive ids, empty slots), so that even a forged file cannot make a query panic.
-//! Anything else is reported in [`CacheReport::rejected`], rebuilt and overwritten. Files
-//! are written atomically (a temporary file renamed over the old one).
+//! Anything else is reported in [`CacheReport::rejected`], rebuilt and overwritten.
+//!
+//! Shared cache directories: a file is opened only if it is a regular file of at most
+//! [`max_file_bytes`] for the scene (a FIFO or `/dev/zero` planted at its name is rejected,
+//! never waited on or read without end). It is mapped in place only when nobody but this user
+//! (or root) can change it: owned by this user or root and writable by neither group nor
+//! others. Any other file is copied into private anonymous memory first
+//! ([`CacheReport::copied`]), whose sections are then used in place as a mapping's would be,
+//! so that another user truncating the file during a render cannot kill it with `SIGBUS`.
+//! Files are written through [`crate::io::output`] (an unpredictable temporary name created
+//! exclusively, renamed over a regular file or nothing) with mode 0644, in a directory
+//! created with mode 0755; a directory that others can write is reported.
 //!
 //! Layout (little-endian, as the machine writes it):
 //!
@@ -34,7 +44,6 @@ use memmap2::Mmap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
 use xxhash_rust::xxh3::Xxh3;
 
 /// Version of the file layout and of everything the key does not see; bump it whenever the
@@ -159,6 +168,12 @@ pub struct CacheReport {
     pub path: PathBuf,
     /// True when the acceleration structures came from the file.
     pub loaded: bool,
+    /// True when the file could be changed by another user, so it was copied into private
+    /// memory instead of being mapped in place (see the module docs).
+    pub copied: bool,
+    /// Who else can write the cache directory, when someone can (`"others"`, `"its group"`,
+    /// `"its owner, uid N"`): they can replace the cache files.
+    pub dir_writable_by: Option<String>,
     /// The file that was there but not trusted (and has been rebuilt), if any.
     pub rejected: Option<CacheError>,
     /// Writing the rebuilt structures failed (the scene is fine; the next start builds again).
@@ -169,6 +184,20 @@ impl CacheReport {
     /// One line per problem, for the user (empty when the cache worked).
     pub fn warnings(&self) -> Vec<String> {
         let mut w = Vec::new();
+        if let Some(who) = &self.dir_writable_by {
+            let dir = self.path.parent().unwrap_or(Path::new("."));
+            w.push(format!(
+                "BVH cache directory {} is writable by {who}: they can replace its files (raypack checks every \
+                 file, and copies files it does not own instead of mapping them)",
+                dir.display()
+            ));
+        }
+        if self.copied {
+            w.push(format!(
+                "BVH cache file {} can be changed by other users: read into memory instead of mapped (a slower start)",
+                self.path.display()
+            ));
+        }
         if let Some(e) = &self.rejected {
             w.push(format!("BVH cache rejected and rebuilt: {e}"));
         }
@@ -206,12 +235,21 @@ impl SceneBuilder {
         let key = CacheKey::of(&kept.triangles, &kept.spheres, opts);
         let path = key.path_in(dir);
         let num_prims = kept.triangles.len() + kept.spheres.len();
-        let mut cache = CacheReport { path: path.clone(), loaded: false, rejected: None, write_error: None };
+        let mut cache = CacheReport {
+            path: path.clone(),
+            loaded: false,
+            copied: false,
+            dir_writable_by: None,
+            rejected: None,
+            write_error: None,
+        };
+        cache.dir_writable_by = writable_by_others(dir);
         match load(&path, key, num_prims) {
-            Ok(Some(mut accel)) => {
+            Ok(Some((mut accel, copied))) => {
                 // The key covers `opts`, so the file's blocks are laid out for its triangle test.
                 accel.bvh8.test = TriangleTest::from_watertight(opts.watertight);
                 cache.loaded = true;
+                cache.copied = copied;
                 return (kept.with_accel(accel.bounds, accel.bvh2, accel.bvh8), report, cache);
             }
             Ok(None) => {}
@@ -219,6 +257,7 @@ impl SceneBuilder {
         }
         let scene = kept.build(opts);
         cache.write_error = store(dir, &path, key, &scene).err();
+        cache.dir_writable_by = writable_by_others(dir);
         (scene, report, cache)
     }
 }
@@ -301,7 +340,7 @@ impl<'a> SectionWriter<'a> {
     }
 
     /// Writes header, table and sections to `out`, returning the number of bytes.
-    fn write_to(mut self, key: CacheKey, out: &mut impl Write) -> std::io::Result<u64> {
+    fn write_to(mut self, key: CacheKey, out: &mut dyn Write) -> std::io::Result<u64> {
         let table_end = (64 + 32 * self.entries.len()) as u64;
         let mut at = table_end.next_multiple_of(SECTION_ALIGN);
         for (e, d) in self.entries.iter_mut().zip(&self.data) {
@@ -459,31 +498,106 @@ impl<'a> CacheFile<'a> {
     }
 }
 
-/// Reads the cache file at `path`: `Ok(None)` when there is none.
-fn load(path: &Path, key: CacheKey, num_prims: usize) -> Result<Option<Accel>, CacheError> {
-    let file = match std::fs::File::open(path) {
+/// The largest cache file read for a scene of `num_prims` primitives: far above what a build
+/// writes (at most about 620 bytes per primitive, when every leaf block holds one triangle and
+/// the binary BVH is kept), so that a planted file cannot make the loader read more.
+pub fn max_file_bytes(num_prims: usize) -> u64 {
+    (num_prims as u64).saturating_mul(1024).saturating_add(1 << 20)
+}
+
+/// Reads the cache file at `path`: `Ok(None)` when there is none; with the structures, whether
+/// the file was copied rather than mapped (see the module docs).
+fn load(path: &Path, key: CacheKey, num_prims: usize) -> Result<Option<(Accel, bool)>, CacheError> {
+    use crate::io::input::open_regular;
+    let (file, len) = match open_regular(path, max_file_bytes(num_prims), "BVH cache files of this scene") {
         Ok(f) => f,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(io(path)(e)),
     };
-    let len = file.metadata().map_err(io(path))?.len();
     if len < std::mem::size_of::<FileHeader>() as u64 {
-        let bytes = std::fs::read(path).map_err(io(path))?;
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(&mut std::io::Read::take(&file, len), &mut bytes).map_err(io(path))?;
         return CacheFile::check(path, &bytes, key).map(|_| None);
     }
-    // SAFETY: the mapping is read-only, and the BVH8's arrays read it in place for as long
-    // as the scene lives. raypack never modifies a cache file in place (it renames a new file
-    // over it, which leaves this mapping's inode intact). Another process truncating the file
-    // while it is mapped could raise SIGBUS, the accepted risk of every memory-mapped reader;
-    // bytes changed under us after the checks below cannot cause undefined behaviour (the
-    // arrays are plain `Pod` data and every kernel index is bounds-checked), only wrong hits
-    // or a panic. `populate` reads the whole file ahead (MAP_POPULATE) instead of faulting
-    // page by page.
-    let map = Arc::new(unsafe { memmap2::MmapOptions::new().populate().map(&file) }.map_err(io(path))?);
+    let private = changed_only_by_us(&file.metadata().map_err(io(path))?);
+    let map = if private {
+        // SAFETY: the mapping is read-only, and the BVH8's arrays read it in place for as long
+        // as the scene lives. Only this user or root can change the file (checked just above on
+        // the open descriptor), and raypack never modifies a cache file in place (it renames a
+        // new file over it, which leaves this mapping's inode intact). The user truncating the
+        // file by hand during a render would raise SIGBUS, the risk of every memory-mapped
+        // reader; files others can change are copied instead. Bytes changed under us after the
+        // checks below cannot cause undefined behaviour (the arrays are plain `Pod` data and
+        // every kernel index is bounds-checked), only wrong hits or a panic. `populate` reads
+        // the whole file ahead (MAP_POPULATE) instead of faulting page by page.
+        unsafe { memmap2::MmapOptions::new().populate().map(&file) }.map_err(io(path))?
+    } else {
+        copy_to_private_memory(&file, len).map_err(io(path))?
+    };
+    let map = Arc::new(map);
     let file = CacheFile::check_mapped(path, &map, key)?;
     let accel = read_accel(&file)?;
     check_accel(&accel, num_prims).map_err(|what| CacheError::Malformed { path: path.to_path_buf(), what })?;
-    Ok(Some(accel))
+    Ok(Some((accel, !private)))
+}
+
+/// The owners whose files no other user can change: this user and root.
+#[cfg(unix)]
+fn trusted_owner(uid: u32) -> bool {
+    // SAFETY: geteuid has no preconditions and cannot fail.
+    uid == 0 || uid == unsafe { libc::geteuid() }
+}
+
+/// True when nobody but this user (or root) can write the file: it is owned by one of them
+/// and writable by neither group nor others.
+fn changed_only_by_us(meta: &std::fs::Metadata) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        trusted_owner(meta.uid()) && meta.mode() & 0o022 == 0
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = meta;
+        false
+    }
+}
+
+/// Who besides this user can create, replace or delete files in `dir` (see
+/// [`CacheReport::dir_writable_by`]); `None` when nobody, or when `dir` cannot be read.
+fn writable_by_others(dir: &Path) -> Option<String> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        let meta = std::fs::metadata(dir).ok()?;
+        if meta.mode() & 0o002 != 0 {
+            Some(format!("all users (mode {:o})", meta.mode() & 0o7777))
+        } else if meta.mode() & 0o020 != 0 {
+            Some(format!("its group (gid {}, mode {:o})", meta.gid(), meta.mode() & 0o7777))
+        } else if !trusted_owner(meta.uid()) {
+            Some(format!("its owner (uid {})", meta.uid()))
+        } else {
+            None
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = dir;
+        None
+    }
+}
+
+/// The first `len` bytes of `file` in fresh read-only anonymous memory (page-aligned, so the
+/// sections can be used in place as in a mapping of the file); a file cut short meanwhile is
+/// an error. (The page faults of the fresh memory are most of the cost: 40 ms for the
+/// dragon's 58 MB, whether one thread reads or all of them.)
+fn copy_to_private_memory(file: &std::fs::File, len: u64) -> std::io::Result<Mmap> {
+    let mut copy = memmap2::MmapMut::map_anon(len as usize)?;
+    #[cfg(unix)]
+    std::os::unix::fs::FileExt::read_exact_at(file, &mut copy, 0)?;
+    #[cfg(not(unix))]
+    std::io::Read::read_exact(&mut &*file, &mut copy)?;
+    copy.make_read_only()
 }
 
 fn read_accel(f: &CacheFile) -> Result<Accel, CacheError> {
@@ -605,10 +719,12 @@ fn io(p: &Path) -> impl Fn(std::io::Error) -> CacheError + '_ {
 }
 
 fn store(dir: &Path, path: &Path, key: CacheKey, scene: &Scene) -> Result<(), CacheError> {
-    static SERIAL: AtomicU64 = AtomicU64::new(0);
-    std::fs::create_dir_all(dir).map_err(io(dir))?;
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.tmp{}-{}", std::process::id(), SERIAL.fetch_add(1, Ordering::Relaxed)));
+    use crate::io::output::{OutputOptions, stage};
+    let mut create = std::fs::DirBuilder::new();
+    create.recursive(true);
+    #[cfg(unix)]
+    std::os::unix::fs::DirBuilderExt::mode(&mut create, 0o755);
+    create.create(dir).map_err(io(dir))?;
     let mut w = SectionWriter::new();
     let bounds = [scene.bounds];
     w.push("bounds", &bounds);
@@ -618,14 +734,14 @@ fn store(dir: &Path, path: &Path, key: CacheKey, scene: &Scene) -> Result<(), Ca
     w.push("bvh8.nodes", &scene.bvh8.nodes);
     w.push("bvh8.tris", &scene.bvh8.tris);
     w.push("bvh8.spheres", &scene.bvh8.spheres);
-    let result = std::fs::File::create(&tmp)
-        .map_err(io(&tmp))
-        .and_then(|f| w.write_to(key, &mut std::io::BufWriter::with_capacity(1 << 20, f)).map_err(io(&tmp)))
-        .and_then(|_| std::fs::rename(&tmp, path).map_err(io(path)));
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+    // Readable by the other users of a shared cache; only a regular file is replaced.
+    let opts = OutputOptions { mode: 0o644, exact_mode: true, allow_fifo: false, sync: false, ..Default::default() };
+    let mut w = Some(w);
+    let output = |e: crate::io::output::OutputError| CacheError::Io { path: e.path, source: e.source };
+    stage(path, &opts, &mut |out| w.take().map_or(Ok(()), |w| w.write_to(key, out).map(|_| ())))
+        .map_err(output)?
+        .commit()
+        .map_err(output)
 }
 
 /// The file name of the cache of `builder`'s geometry with `opts` inside `dir` (what

@@ -63,3 +63,17 @@ impl Light {
         matches!(self, Light::Point { .. } | Light::Directional { .. } | Light::Spot { .. })
     }
 }
+
+impl Light {
+    /// Why the light is meaningless, if it is: its intensity or radiance must be finite and
+    /// non-negative ([`crate::scene::material::check_radiance`]).
+    pub fn check(&self) -> Result<(), String> {
+        use crate::scene::material::check_radiance;
+        match *self {
+            Light::Point { intensity, .. } | Light::Spot { intensity, .. } => check_radiance("intensity", intensity),
+            Light::Directional { radiance, .. } | Light::Area { radiance, .. } | Light::Environment { radiance } => {
+                check_radiance("radiance", radiance)
+            }
+        }
+    }
+}

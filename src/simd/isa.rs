@@ -164,6 +164,9 @@ pub trait IsaLanes: Copy + Send + Sync + 'static {
     type F8: Transpose8;
     /// 16 lanes (16-ray packets).
     type F16: Lanes;
+    /// The packet lanes of the stream queries ([`crate::Scene::intersect_batch`] and kin):
+    /// `F16` or `F8`, whichever traces faster on this tier (see [`crate::bvh::queries`]).
+    type Stream: Lanes;
 }
 
 /// The baseline tier's lanes (`wide`'s types). Also usable directly: it needs no CPU check.
@@ -175,6 +178,7 @@ impl IsaLanes for Baseline {
     type F4 = F32x4;
     type F8 = F32x8;
     type F16 = F32x16;
+    type Stream = F32x16;
 }
 
 /// The AVX2 tier's lanes.
@@ -188,6 +192,7 @@ impl IsaLanes for Avx2 {
     type F4 = F32x4;
     type F8 = super::x86::M256;
     type F16 = super::x86::Pair<super::x86::M256>;
+    type Stream = super::x86::Pair<super::x86::M256>;
 }
 
 /// The AVX-512 tier's lanes.
@@ -201,6 +206,7 @@ impl IsaLanes for Avx512 {
     type F4 = F32x4;
     type F8 = super::x86::M256;
     type F16 = super::x86::M512;
+    type Stream = super::x86::M512;
 }
 
 /// A kernel invocation, run with the lanes of one ISA tier. `run` and everything it calls

@@ -23,7 +23,7 @@
 //! every SIMD kernel bit-compatible with its scalar twin whatever the ISA. No kernel uses
 //! fused multiply-adds, for the same reason.
 
-use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
+use std::ops::{Add, BitAnd, BitOr, BitXor, Div, Mul, Neg, Not, Sub};
 
 pub mod isa;
 mod portable;
@@ -51,6 +51,7 @@ pub trait Lanes:
     + Neg<Output = Self>
     + BitAnd<Output = Self>
     + BitOr<Output = Self>
+    + BitXor<Output = Self>
     + Not<Output = Self>
     + std::fmt::Debug
 {
@@ -244,7 +245,8 @@ pub(crate) fn check_lanes<V: Lanes>() {
     }
     let bit_and = (V::from_bitmask(0b1010) & V::from_bitmask(0b0110)).bitmask();
     let bit_or = (V::from_bitmask(0b1010) | V::from_bitmask(0b0110)).bitmask();
-    assert_eq!((bit_and, bit_or), (0b0010 & all, 0b1110 & all));
+    let bit_xor = (V::from_bitmask(0b1010) ^ V::from_bitmask(0b0110)).bitmask();
+    assert_eq!((bit_and, bit_or, bit_xor), (0b0010 & all, 0b1110 & all, 0b1100 & all));
 }
 
 #[cfg(test)]

@@ -11,7 +11,7 @@
 
 use super::{Lanes, Transpose8};
 use std::arch::x86_64::*;
-use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
+use std::ops::{Add, BitAnd, BitOr, BitXor, Div, Mul, Neg, Not, Sub};
 
 /// Eight `f32` lanes in one AVX register.
 #[derive(Clone, Copy, Debug)]
@@ -75,6 +75,13 @@ macro_rules! binary_ops {
             #[inline(always)]
             fn bitor(self, o: Self) -> Self {
                 $t(simd!($or(self.0, o.0)))
+            }
+        }
+        impl BitXor for $t {
+            type Output = Self;
+            #[inline(always)]
+            fn bitxor(self, o: Self) -> Self {
+                $t(simd!($xor(self.0, o.0)))
             }
         }
         impl Neg for $t {
@@ -348,6 +355,7 @@ pair_op!(Mul, mul);
 pair_op!(Div, div);
 pair_op!(BitAnd, bitand);
 pair_op!(BitOr, bitor);
+pair_op!(BitXor, bitxor);
 
 impl<V: Lanes> Neg for Pair<V> {
     type Output = Self;

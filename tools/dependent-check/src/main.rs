@@ -1,12 +1,12 @@
-//! Traces `raypack bench`'s ray sets with raypack's SIMD kernels on one thread, as a
-//! dependent crate built with no RUSTFLAGS does, and prints one line per set and kernel:
-//! `set kernel isa Mrays/s` (median of `--runs`, each run repeating the set to last 50 ms).
-//!
-//! Usage: dependent-check SCENE [--isa sse|avx2|avx512] [--runs N] [-r W H]
-//!        dependent-check --list-isas
-//!
-//! The project builds the same source as `examples/dependent_kernels.rs` (which includes this
-//! file), so `run.sh` compares one program under two builds.
+// Traces `raypack bench`'s ray sets with raypack's SIMD kernels on one thread, as a
+// dependent crate built with no RUSTFLAGS does, and prints one line per set and kernel:
+// `set kernel isa Mrays/s` (median of `--runs`, each run repeating the set to last 50 ms).
+//
+// Usage: dependent-check SCENE [--isa sse|avx2|avx512] [--runs N] [-r W H]
+//        dependent-check --list-isas
+//
+// The project builds the same source as `examples/dependent_kernels.rs` (which includes this
+// file), so `run.sh` compares one program under two builds.
 
 use raypack::kernels::{Results, simd_kernels};
 use raypack::{BuildOptions, Isa};

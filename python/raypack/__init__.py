@@ -1,0 +1,17 @@
+"""raypack: a data-oriented SIMD ray tracer (BVH8, ray packets) for numpy rays.
+
+    >>> import numpy as np, raypack
+    >>> scene = raypack.Scene(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]]))
+    >>> hits = scene.intersect(origins=[0.25, 0.25, 1.0], directions=np.array([[0, 0, -1.0]]))
+    >>> hits.t, hits.prim
+    (array([1.], dtype=float32), array([0]))
+
+``Scene`` builds a scene from vertex and face arrays, ``load`` reads a scene file,
+``Scene.intersect`` / ``Scene.occluded`` trace numpy rays over all cores with the GIL
+released, ``render`` runs the path tracer, and ``raypack.trimesh.RayMeshIntersector`` is a
+drop-in for trimesh's ray queries.
+"""
+
+from ._raypack import Hits, Scene, SceneWarning, load, render
+
+__all__ = ["Hits", "Scene", "SceneWarning", "load", "render"]

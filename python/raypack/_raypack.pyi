@@ -1,0 +1,208 @@
+"""Type stubs of the native module ``raypack._raypack`` (re-exported by ``raypack``)."""
+
+from collections.abc import Iterator
+import pathlib
+from os import PathLike
+from typing import Literal, Union, final
+
+import numpy as np
+import numpy.typing as npt
+
+_Real = Union[float, int, np.floating, np.integer]
+_Points = npt.ArrayLike  # (K, 3) real array, or (3,) for one point
+_PerRay = Union[_Real, npt.ArrayLike]  # a number, or a (K,) real array
+_Quality = Literal["fast", "medium", "high"]
+_Integrator = Literal["global", "direct", "direct-only", "indirect-only", "bounce", "normals"]
+_Path = Union[str, PathLike[str]]
+
+__all__ = ["Scene", "Hits", "load", "render", "_ray_sets", "_intersect_stream", "_plane_points", "SceneWarning"]
+
+class SceneWarning(UserWarning):
+    """A scene was loaded or committed with something left out (dropped faces, a BVH cache
+    that could not be used, loader warnings)."""
+
+@final
+class Hits:
+    """The closest hits of a ray query, one entry per ray.
+
+    ``t`` float32 (``inf`` on a miss), ``prim`` int64 (``-1`` on a miss), ``u``, ``v`` float32
+    barycentrics of the second and third vertex (0 on a miss), ``normal`` float32 ``(K, 3)``
+    unit geometric normal ``(v1 - v0) x (v2 - v0)`` (zero on a miss). Unpacks as
+    ``t, prim, u, v, normal = hits``.
+    """
+
+    @property
+    def t(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def prim(self) -> npt.NDArray[np.int64]: ...
+    @property
+    def u(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def v(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def normal(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def hit(self) -> npt.NDArray[np.bool_]:
+        """Whether each ray hit something (``prim >= 0``)."""
+    def __iter__(self) -> Iterator[npt.NDArray[np.generic]]: ...
+    def __len__(self) -> int: ...
+
+@final
+class Scene:
+    """A committed scene: triangles (and the spheres of scene files) under raypack's BVH8.
+
+    ``vertices`` is an ``(N, 3)`` array of positions (any real dtype, rounded to float32),
+    ``faces`` an ``(M, 3)`` integer array of vertex indices; any memory layout. Faces that
+    cannot be traced (NaN/Inf or huge coordinates, zero area, collinear corners) are dropped,
+    counted in ``report`` and announced by a ``SceneWarning``; ``prim`` ids still index the
+    ``faces`` given. ``quality`` is the BVH build effort, ``watertight`` selects the
+    watertight triangle test (no ray slips through a shared edge), ``bvh_cache`` a directory
+    where the BVH is saved and reloaded, ``threads`` the build's threads (default: all cores).
+
+    Raises ``ValueError`` / ``TypeError`` naming the argument for a wrong shape or dtype and
+    for indices out of range.
+    """
+
+    def __new__(
+        cls,
+        vertices: npt.ArrayLike,
+        faces: npt.ArrayLike,
+        *,
+        quality: _Quality = "medium",
+        watertight: bool = False,
+        bvh_cache: _Path | None = None,
+        threads: int | None = None,
+    ) -> Scene: ...
+    def intersect(
+        self,
+        origins: _Points,
+        directions: _Points,
+        tnear: _PerRay | None = None,
+        tfar: _PerRay | None = None,
+        *,
+        threads: int | None = None,
+    ) -> Hits:
+        """Closest hit of each ray ``origin + t * direction`` over ``t`` in ``(tnear, tfar]``.
+
+        ``origins`` and ``directions`` are ``(K, 3)`` real arrays (float32 and float64 are read
+        in place whatever their strides; one ``(3,)`` point stands for all rays); ``tnear``
+        (default 0) and ``tfar`` (default ``inf``) are numbers or ``(K,)`` arrays. Directions
+        need not be unit length: ``t`` is measured in units of their length. Rays with a
+        NaN/Inf component, a zero direction or ``tnear > tfar`` miss. Traced over ``threads``
+        threads (default: all cores) with the GIL released, as 16-ray packets in the order
+        given (keep coherent rays together).
+        """
+    def occluded(
+        self,
+        origins: _Points,
+        directions: _Points,
+        tnear: _PerRay | None = None,
+        tfar: _PerRay | None = None,
+        *,
+        threads: int | None = None,
+    ) -> npt.NDArray[np.bool_]:
+        """Whether anything lies on each ray over ``(tnear, tfar]``: ``bool (K,)``. Arguments as
+        for ``intersect``."""
+    def intersect_all(
+        self,
+        origins: _Points,
+        directions: _Points,
+        tnear: _PerRay | None = None,
+        tfar: _PerRay | None = None,
+        *,
+        max_hits: int = 100,
+        min_step: float = 0.0,
+        threads: int | None = None,
+    ) -> tuple[
+        npt.NDArray[np.int64],
+        npt.NDArray[np.int64],
+        npt.NDArray[np.float32],
+        npt.NDArray[np.float32],
+        npt.NDArray[np.float32],
+    ]:
+        """Every hit along each ray, at most ``max_hits`` per ray: ``(ray, prim, t, u, v)``
+        arrays, ordered by ray, then by ``t``. After a hit at ``t`` the ray goes on from
+        ``t + min_step / |direction|`` (``min_step`` is a distance)."""
+    @property
+    def num_triangles(self) -> int:
+        """Triangles the scene traces (after dropping the untraceable ones)."""
+    @property
+    def num_spheres(self) -> int:
+        """Spheres the scene traces (scene files only)."""
+    @property
+    def bounds(self) -> npt.NDArray[np.float32]:
+        """``(2, 3)`` float32 ``[min, max]`` (NaN for an empty scene)."""
+    @property
+    def report(self) -> dict[str, int]:
+        """What the commit kept and dropped: ``triangles``, ``spheres``, ``dropped_non_finite``,
+        ``dropped_degenerate``, ``dropped_spheres``."""
+    @property
+    def bvh_cache_file(self) -> pathlib.Path | None:
+        """The BVH cache file of this scene (``None`` without ``bvh_cache=``)."""
+    @property
+    def bvh_cache_loaded(self) -> bool:
+        """True when the BVH was read from the cache rather than built."""
+    @property
+    def vertices(self) -> npt.NDArray[np.float32]:
+        """The committed triangles' vertex positions ``(N, 3)`` float32 (a copy)."""
+    @property
+    def faces(self) -> npt.NDArray[np.int64]:
+        """The committed triangles ``(M, 3)`` int64 (a copy). A loaded scene's ``prim`` ids
+        index these rows."""
+
+def load(
+    path: _Path,
+    *,
+    quality: _Quality = "medium",
+    watertight: bool = False,
+    bvh_cache: _Path | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """Loads a scene file (``.dae``, ``.obj``, ``.ply``) and commits it. Raises
+    ``FileNotFoundError`` for a missing file and ``ValueError`` naming the file and the line or
+    element for a malformed one; loader warnings become ``SceneWarning``s."""
+
+def render(
+    scene: Scene | _Path,
+    *,
+    spp: int = 1,
+    max_depth: int = 1,
+    light_samples: int = 1,
+    width: int = 480,
+    height: int = 360,
+    seed: int = 0,
+    integrator: _Integrator = "global",
+    hemisphere: bool = False,
+    russian_roulette: bool = True,
+    threads: int | None = None,
+    quality: _Quality = "medium",
+    watertight: bool = False,
+    bvh_cache: _Path | None = None,
+) -> npt.NDArray[np.float32]:
+    """Renders a scene (a ``Scene`` or a scene file's path) with raypack's path tracer, as
+    ``raypack render`` does with the same settings, and returns the linear HDR image as
+    float32 ``(height, width, 3)``, top row first. The image depends on the seed only, not on
+    the thread count. ``quality``, ``watertight`` and ``bvh_cache`` apply when ``scene`` is a
+    path."""
+
+# Not public API: helpers of tools/bench-python.py and the tests.
+def _ray_sets(
+    scene: Scene, width: int, height: int, seed: int = 1
+) -> dict[str, tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], npt.NDArray[np.float32]]]:
+    """`raypack bench`'s ray sets: ``{"camera" | "diffuse" | "shadow": (origins, directions, tfar)}``."""
+
+def _intersect_stream(
+    scene: Scene, origins: _Points, directions: _Points, tnear: float = 0.0, tfar: float = ...
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.int64], npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+    """The rays traced by the Rust API's ``Scene::intersect_stream``: ``(t, prim, u, v)``."""
+
+def _plane_points(
+    vertices: npt.NDArray[np.float64],
+    faces: npt.NDArray[np.int64],
+    tri: npt.NDArray[np.int64],
+    ray: npt.NDArray[np.int64],
+    t: npt.NDArray[np.float32],
+    origins: npt.NDArray[np.float64],
+    directions: npt.NDArray[np.float64],
+) -> npt.NDArray[np.float64]:
+    """float64 hit locations for ``raypack.trimesh``: where each ray meets its triangle's plane."""

@@ -1,0 +1,699 @@
+//! `raypack._raypack`: the Python module. numpy in, numpy out, in the vocabulary of the Rust
+//! API ([`raypack::Scene`], [`raypack::Hit`]) and of Embree.
+//!
+//! Every entry point checks its arguments under the GIL (errors name the argument, its shape
+//! or dtype and what was expected), then traces with the GIL released, and turns a panic of
+//! the library into a `RuntimeError` instead of unwinding into the interpreter.
+
+mod args;
+mod trace;
+
+use args::RayArgs;
+use numpy::{PyArray1, PyArray2, PyArray3, PyArrayMethods};
+use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyRuntimeError, PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use raypack::io::LoadError;
+use raypack::render::{IntegratorKind, RenderSettings};
+use raypack::{BuildOptions, BuildQuality, CommitReport, Material, Scene, SceneBuilder};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use trace::{HitArrays, Target};
+
+pyo3::create_exception!(
+    _raypack,
+    SceneWarning,
+    pyo3::exceptions::PyUserWarning,
+    "A scene was loaded or committed with something left out (dropped faces, a BVH cache \
+     that could not be used, loader warnings)."
+);
+
+/// Runs `f` with the GIL released on `threads` threads (all cores for `None`), turning a
+/// panic into a `RuntimeError`.
+fn run_detached<T: Send>(
+    py: Python<'_>,
+    pools: &PoolCache,
+    threads: Option<usize>,
+    f: impl FnOnce() -> T + Send,
+) -> PyResult<T> {
+    let pool = pools.get(threads)?;
+    let result = py.detach(move || {
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| match pool {
+            Some(pool) => pool.install(f),
+            None => f(),
+        }))
+    });
+    result.map_err(|panic| {
+        let what = panic
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| panic.downcast_ref::<&str>().copied())
+            .unwrap_or("unknown panic");
+        PyRuntimeError::new_err(format!("raypack: internal error (please report it): {what}"))
+    })
+}
+
+/// The rayon pool of the last `threads=` a scene was asked for (building one per call costs
+/// a thread start per worker).
+#[derive(Default)]
+struct PoolCache(Mutex<Option<(usize, Arc<rayon::ThreadPool>)>>);
+
+impl PoolCache {
+    /// `None`: the global pool (all cores, or `RAYON_NUM_THREADS`).
+    fn get(&self, threads: Option<usize>) -> PyResult<Option<Arc<rayon::ThreadPool>>> {
+        let Some(n) = threads else { return Ok(None) };
+        if n == 0 {
+            return Err(PyValueError::new_err("threads: expected None (all cores) or at least 1, got 0"));
+        }
+        let mut cached = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((m, pool)) = cached.as_ref() {
+            if *m == n {
+                return Ok(Some(pool.clone()));
+            }
+        }
+        let pool = Arc::new(
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .map_err(|e| PyRuntimeError::new_err(format!("threads={n}: cannot start the threads: {e}")))?,
+        );
+        *cached = Some((n, pool.clone()));
+        Ok(Some(pool))
+    }
+}
+
+fn parse_quality(q: &str) -> PyResult<BuildQuality> {
+    match q {
+        "fast" => Ok(BuildQuality::Fast),
+        "medium" => Ok(BuildQuality::Medium),
+        "high" => Ok(BuildQuality::High),
+        _ => Err(PyValueError::new_err(format!("quality: expected 'fast', 'medium' or 'high', got '{q}'"))),
+    }
+}
+
+fn parse_integrator(name: &str) -> PyResult<IntegratorKind> {
+    Ok(match name {
+        "global" => IntegratorKind::Global,
+        "direct" => IntegratorKind::Direct,
+        "direct-only" | "direct_only" => IntegratorKind::DirectOnly,
+        "indirect-only" | "indirect_only" => IntegratorKind::IndirectOnly,
+        "bounce" => IntegratorKind::Bounce,
+        "normals" => IntegratorKind::Normals,
+        _ => {
+            return Err(PyValueError::new_err(format!(
+                "integrator: expected 'global', 'direct', 'direct-only', 'indirect-only', 'bounce' or 'normals', got '{name}'"
+            )));
+        }
+    })
+}
+
+fn load_error(e: LoadError) -> PyErr {
+    match &e {
+        LoadError::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound => {
+            PyFileNotFoundError::new_err(e.to_string())
+        }
+        LoadError::Io { .. } => PyOSError::new_err(e.to_string()),
+        LoadError::UnsupportedFormat { .. } | LoadError::Parse { .. } => PyValueError::new_err(e.to_string()),
+    }
+}
+
+fn warn(py: Python<'_>, message: &str) -> PyResult<()> {
+    let category = py.get_type::<SceneWarning>();
+    PyErr::warn(py, &category, &std::ffi::CString::new(message).unwrap_or_default(), 2)
+}
+
+/// How a scene is built: `quality=`, `watertight=`, `bvh_cache=`, `threads=`.
+struct BuildArgs {
+    opts: BuildOptions,
+    cache: Option<PathBuf>,
+    threads: Option<usize>,
+}
+
+impl BuildArgs {
+    fn new(quality: &str, watertight: bool, bvh_cache: Option<PathBuf>, threads: Option<usize>) -> PyResult<Self> {
+        let opts = BuildOptions { quality: parse_quality(quality)?, watertight, ..BuildOptions::default() };
+        Ok(Self { opts, cache: bvh_cache, threads })
+    }
+}
+
+/// A committed scene: triangles (and the spheres of scene files) under raypack's BVH8.
+///
+/// ``Scene(vertices, faces, *, quality="medium", watertight=False, bvh_cache=None, threads=None)``
+/// builds one from a ``(N, 3)`` array of vertex positions (any real dtype, rounded to float32)
+/// and an ``(M, 3)`` integer array of vertex indices; ``raypack.load(path)`` reads a scene file.
+/// Faces with NaN/Inf or huge coordinates, zero area or collinear corners cannot be traced:
+/// they are dropped, counted in ``report`` and announced by a ``SceneWarning``; ``prim`` ids
+/// still index the ``faces`` given.
+#[pyclass(name = "Scene", module = "raypack", frozen)]
+struct PyScene {
+    scene: Scene,
+    /// The caller's face index of each committed triangle, when the commit dropped some.
+    prim_map: Option<Vec<u32>>,
+    report: CommitReport,
+    /// The BVH cache file and whether the BVH came from it.
+    cache: Option<(PathBuf, bool)>,
+    pools: PoolCache,
+}
+
+impl PyScene {
+    fn target(&self) -> Target<'_> {
+        Target { scene: &self.scene, prim_map: self.prim_map.as_deref() }
+    }
+
+    /// Commits `builder` as `build` says, warning about what was dropped or not cached.
+    fn commit(py: Python<'_>, builder: SceneBuilder, build: &BuildArgs, what: &str) -> PyResult<Self> {
+        let pools = PoolCache::default();
+        let (opts, cache_dir) = (&build.opts, build.cache.as_deref());
+        let (scene, report, cache) = run_detached(py, &pools, build.threads, || match cache_dir {
+            None => {
+                let (s, r) = builder.commit(opts);
+                (s, r, None)
+            }
+            Some(dir) => {
+                let (s, r, c) = builder.commit_cached(opts, dir);
+                (s, r, Some(c))
+            }
+        })?;
+        let mut cache_info = None;
+        if let Some(c) = cache {
+            for w in c.warnings() {
+                warn(py, &format!("{what}: {w}"))?;
+            }
+            cache_info = Some((c.path.clone(), c.loaded));
+        }
+        Ok(PyScene { scene, prim_map: None, report, cache: cache_info, pools })
+    }
+}
+
+/// The caller's index of each kept face: the commit keeps faces in order and drops a face
+/// for its corners' positions only, so equal index triples share a fate and the kept faces
+/// match the given ones greedily.
+fn kept_face_map(given: &[[u32; 3]], kept: &[[u32; 3]]) -> Vec<u32> {
+    let mut map = Vec::with_capacity(kept.len());
+    let mut j = 0;
+    for k in kept {
+        while given[j] != *k {
+            j += 1;
+        }
+        map.push(j as u32);
+        j += 1;
+    }
+    map
+}
+
+#[pymethods]
+impl PyScene {
+    #[new]
+    #[pyo3(signature = (vertices, faces, *, quality = "medium", watertight = false, bvh_cache = None, threads = None))]
+    fn new(
+        py: Python<'_>,
+        vertices: &Bound<'_, PyAny>,
+        faces: &Bound<'_, PyAny>,
+        quality: &str,
+        watertight: bool,
+        bvh_cache: Option<PathBuf>,
+        threads: Option<usize>,
+    ) -> PyResult<Self> {
+        let build = BuildArgs::new(quality, watertight, bvh_cache, threads)?;
+        let positions = args::vertices(vertices)?;
+        let indices = args::faces(faces, positions.len())?;
+        // As a PLY file of these triangles loads: one default material, area-weighted vertex
+        // normals for smooth shading, and the default light rig, so that it renders alike.
+        let mut b = SceneBuilder::new();
+        let material = b.add_material(Material::default());
+        let normals = raypack::io::vertex_normals(&positions, &indices);
+        b.add_mesh_with_normals(&positions, Some(&normals), &indices, material)
+            .map_err(|e| PyValueError::new_err(format!("faces: {e}")))?;
+        for light in raypack::io::default_light_rig(&b.bounds(), None) {
+            b.add_light(light);
+        }
+        drop((positions, normals));
+        let mut scene = Self::commit(py, b, &build, "raypack.Scene")?;
+        let r = &scene.report;
+        if r.dropped() > 0 {
+            scene.prim_map = Some(kept_face_map(&indices, &scene.scene.triangles.indices));
+            warn(
+                py,
+                &format!(
+                    "raypack.Scene: dropped {} of {} faces ({} with NaN/Inf or huge coordinates, {} with zero area or collinear corners); they are never hit",
+                    r.dropped(),
+                    indices.len(),
+                    r.dropped_non_finite,
+                    r.dropped_degenerate
+                ),
+            )?;
+        }
+        Ok(scene)
+    }
+
+    /// Closest hit of each ray ``origin + t * direction`` over ``t`` in ``(tnear, tfar]``, as a
+    /// ``Hits`` of arrays ``t, prim, u, v, normal``.
+    ///
+    /// ``origins`` and ``directions`` are ``(K, 3)`` real arrays (float32 and float64 are read
+    /// in place whatever their strides; one ``(3,)`` point stands for all rays); ``tnear``
+    /// (default 0) and ``tfar`` (default ``inf``) are numbers or ``(K,)`` arrays. Directions
+    /// need not be unit length: ``t`` is measured in units of their length. Rays with a
+    /// NaN/Inf component, a zero direction or ``tnear > tfar`` miss. Traced over ``threads``
+    /// threads (default: all cores) with the GIL released, as 16-ray packets in the order
+    /// given (keep coherent rays together).
+    #[pyo3(signature = (origins, directions, tnear = None, tfar = None, *, threads = None))]
+    fn intersect<'py>(
+        &self,
+        py: Python<'py>,
+        origins: &Bound<'py, PyAny>,
+        directions: &Bound<'py, PyAny>,
+        tnear: Option<&Bound<'py, PyAny>>,
+        tfar: Option<&Bound<'py, PyAny>>,
+        threads: Option<usize>,
+    ) -> PyResult<Hits> {
+        let a = RayArgs::new(origins, directions, tnear, tfar)?;
+        let rays = a.rays()?;
+        let k = rays.len;
+        // SAFETY (all five): uninitialised numpy arrays (`np.empty`; zeroing them cost 4 ns per
+        // ray), of which `trace::intersect` writes every element before Python can see them
+        // (on an error or panic they are dropped unseen).
+        let t = unsafe { PyArray1::<f32>::new(py, k, false) };
+        let prim = unsafe { PyArray1::<i64>::new(py, k, false) };
+        let u = unsafe { PyArray1::<f32>::new(py, k, false) };
+        let v = unsafe { PyArray1::<f32>::new(py, k, false) };
+        let normal = unsafe { PyArray2::<f32>::new(py, (k, 3), false) };
+        {
+            let (mut tw, mut pw, mut uw, mut vw, mut nw) =
+                (t.readwrite(), prim.readwrite(), u.readwrite(), v.readwrite(), normal.readwrite());
+            let out = HitArrays {
+                t: tw.as_slice_mut()?,
+                prim: pw.as_slice_mut()?,
+                u: uw.as_slice_mut()?,
+                v: vw.as_slice_mut()?,
+                normal: nw.as_slice_mut()?,
+            };
+            let target = self.target();
+            run_detached(py, &self.pools, threads, move || trace::intersect(target, rays, out))?;
+        }
+        Ok(Hits {
+            t: t.into_any().unbind(),
+            prim: prim.into_any().unbind(),
+            u: u.into_any().unbind(),
+            v: v.into_any().unbind(),
+            normal: normal.into_any().unbind(),
+        })
+    }
+
+    /// Whether anything lies on each ray over ``(tnear, tfar]``: ``bool (K,)``. Arguments as
+    /// for ``intersect``.
+    #[pyo3(signature = (origins, directions, tnear = None, tfar = None, *, threads = None))]
+    fn occluded<'py>(
+        &self,
+        py: Python<'py>,
+        origins: &Bound<'py, PyAny>,
+        directions: &Bound<'py, PyAny>,
+        tnear: Option<&Bound<'py, PyAny>>,
+        tfar: Option<&Bound<'py, PyAny>>,
+        threads: Option<usize>,
+    ) -> PyResult<Bound<'py, PyArray1<bool>>> {
+        let a = RayArgs::new(origins, directions, tnear, tfar)?;
+        let rays = a.rays()?;
+        // SAFETY: `np.empty`, every element written by `trace::occluded` (as in `intersect`).
+        let out = unsafe { PyArray1::<bool>::new(py, rays.len, false) };
+        {
+            let mut w = out.readwrite();
+            let slice = w.as_slice_mut()?;
+            let target = self.target();
+            run_detached(py, &self.pools, threads, move || trace::occluded(target, rays, slice))?;
+        }
+        Ok(out)
+    }
+
+    /// Every hit along each ray, at most ``max_hits`` per ray: ``(ray, prim, t, u, v)`` arrays,
+    /// ordered by ray, then by ``t``. After a hit at ``t`` the ray goes on from
+    /// ``t + min_step / |direction|`` (``min_step`` is a distance).
+    #[pyo3(signature = (origins, directions, tnear = None, tfar = None, *, max_hits = 100, min_step = 0.0, threads = None))]
+    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    fn intersect_all<'py>(
+        &self,
+        py: Python<'py>,
+        origins: &Bound<'py, PyAny>,
+        directions: &Bound<'py, PyAny>,
+        tnear: Option<&Bound<'py, PyAny>>,
+        tfar: Option<&Bound<'py, PyAny>>,
+        max_hits: usize,
+        min_step: f64,
+        threads: Option<usize>,
+    ) -> PyResult<(
+        Bound<'py, PyArray1<i64>>,
+        Bound<'py, PyArray1<i64>>,
+        Bound<'py, PyArray1<f32>>,
+        Bound<'py, PyArray1<f32>>,
+        Bound<'py, PyArray1<f32>>,
+    )> {
+        if !(min_step >= 0.0 && min_step.is_finite()) {
+            return Err(PyValueError::new_err(format!("min_step: expected a finite distance >= 0, got {min_step}")));
+        }
+        let a = RayArgs::new(origins, directions, tnear, tfar)?;
+        let rays = a.rays()?;
+        let target = self.target();
+        let all = run_detached(py, &self.pools, threads, move || {
+            trace::intersect_all(target, rays, max_hits, min_step as f32)
+        })?;
+        Ok((
+            PyArray1::from_vec(py, all.ray),
+            PyArray1::from_vec(py, all.prim),
+            PyArray1::from_vec(py, all.t),
+            PyArray1::from_vec(py, all.u),
+            PyArray1::from_vec(py, all.v),
+        ))
+    }
+
+    /// Triangles the scene traces (after dropping the untraceable ones).
+    #[getter]
+    fn num_triangles(&self) -> usize {
+        self.scene.num_triangles()
+    }
+
+    /// Spheres the scene traces (scene files only).
+    #[getter]
+    fn num_spheres(&self) -> usize {
+        self.scene.num_spheres()
+    }
+
+    /// The scene's bounds as a ``(2, 3)`` float32 array ``[min, max]`` (NaN for an empty scene).
+    #[getter]
+    fn bounds<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f32>> {
+        let b = self.scene.bounds();
+        let rows = if b.is_valid() { [b.min.to_array(), b.max.to_array()] } else { [[f32::NAN; 3]; 2] };
+        PyArray2::from_vec2(py, &[rows[0].to_vec(), rows[1].to_vec()]).expect("two rows of three")
+    }
+
+    /// What the commit kept and dropped: a dict of counts.
+    #[getter]
+    fn report<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let r = &self.report;
+        let d = PyDict::new(py);
+        d.set_item("triangles", r.triangles)?;
+        d.set_item("spheres", r.spheres)?;
+        d.set_item("dropped_non_finite", r.dropped_non_finite)?;
+        d.set_item("dropped_degenerate", r.dropped_degenerate)?;
+        d.set_item("dropped_spheres", r.dropped_spheres)?;
+        Ok(d)
+    }
+
+    /// The BVH cache file of this scene (``None`` without ``bvh_cache=``).
+    #[getter]
+    fn bvh_cache_file(&self) -> Option<PathBuf> {
+        self.cache.as_ref().map(|(p, _)| p.clone())
+    }
+
+    /// True when the BVH was read from the cache rather than built.
+    #[getter]
+    fn bvh_cache_loaded(&self) -> bool {
+        self.cache.as_ref().is_some_and(|(_, loaded)| *loaded)
+    }
+
+    /// The committed triangles' vertex positions ``(N, 3)`` float32 (a copy).
+    #[getter]
+    fn vertices<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f32>> {
+        let p = &self.scene.triangles.positions;
+        let flat: Vec<f32> = p.iter().flat_map(|v| v.to_array()).collect();
+        PyArray1::from_vec(py, flat).reshape((p.len(), 3)).expect("3 floats per vertex")
+    }
+
+    /// The committed triangles ``(M, 3)`` int64 (a copy): a loaded scene's ``prim`` ids index
+    /// these rows; a scene built from arrays reports the caller's face indices instead.
+    #[getter]
+    fn faces<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> {
+        let f = &self.scene.triangles.indices;
+        let flat: Vec<i64> = f.iter().flat_map(|t| t.map(|i| i as i64)).collect();
+        PyArray1::from_vec(py, flat).reshape((f.len(), 3)).expect("3 indices per face")
+    }
+
+    fn __repr__(&self) -> String {
+        format!("<raypack.Scene: {} triangles, {} spheres>", self.scene.num_triangles(), self.scene.num_spheres())
+    }
+}
+
+/// The closest hits of a ray query, one entry per ray: ``t`` (float32, ``inf`` on a miss),
+/// ``prim`` (int64, ``-1`` on a miss), ``u``, ``v`` (float32 barycentrics of the second and
+/// third vertex, 0 on a miss) and ``normal`` (float32 ``(K, 3)``, unit geometric normal
+/// ``(v1 - v0) x (v2 - v0)``, zero on a miss). Unpacks as ``t, prim, u, v, normal = hits``.
+#[pyclass(name = "Hits", module = "raypack", frozen)]
+struct Hits {
+    #[pyo3(get)]
+    t: Py<PyAny>,
+    #[pyo3(get)]
+    prim: Py<PyAny>,
+    #[pyo3(get)]
+    u: Py<PyAny>,
+    #[pyo3(get)]
+    v: Py<PyAny>,
+    #[pyo3(get)]
+    normal: Py<PyAny>,
+}
+
+#[pymethods]
+impl Hits {
+    fn __iter__<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let items = (&self.t, &self.prim, &self.u, &self.v, &self.normal).into_pyobject(py)?;
+        Ok(items.into_any().try_iter()?.into_any())
+    }
+
+    fn __len__(&self) -> usize {
+        5
+    }
+
+    /// Whether each ray hit something: ``prim >= 0``.
+    #[getter]
+    fn hit<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        self.prim.bind(py).call_method1("__ge__", (0,))
+    }
+
+    fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
+        let n = self.t.bind(py).len()?;
+        let hits: usize = self.hit(py)?.call_method0("sum")?.extract()?;
+        Ok(format!("<raypack.Hits: {hits} of {n} rays hit>"))
+    }
+}
+
+/// Loads a scene file (``.dae``, ``.obj``, ``.ply``) and commits it.
+#[pyfunction]
+#[pyo3(signature = (path, *, quality = "medium", watertight = false, bvh_cache = None, threads = None))]
+fn load(
+    py: Python<'_>,
+    path: PathBuf,
+    quality: &str,
+    watertight: bool,
+    bvh_cache: Option<PathBuf>,
+    threads: Option<usize>,
+) -> PyResult<PyScene> {
+    let build = BuildArgs::new(quality, watertight, bvh_cache, threads)?;
+    load_path(py, &path, &build)
+}
+
+fn load_path(py: Python<'_>, path: &Path, build: &BuildArgs) -> PyResult<PyScene> {
+    let (builder, warnings) = {
+        let p = path.to_path_buf();
+        run_detached(py, &PoolCache::default(), build.threads, move || raypack::io::load_scene_with_warnings(&p))?
+            .map_err(load_error)?
+    };
+    for w in warnings {
+        warn(py, &w)?;
+    }
+    let scene = PyScene::commit(py, builder, build, &path.display().to_string())?;
+    if scene.report.dropped() > 0 {
+        warn(py, &format!("{}: {}", path.display(), scene.report))?;
+    }
+    Ok(scene)
+}
+
+/// Renders a scene (a ``Scene`` or a scene file's path) with the path tracer and returns the
+/// linear HDR image as float32 ``(height, width, 3)``, top row first.
+#[pyfunction]
+#[pyo3(signature = (scene, *, spp = 1, max_depth = 1, light_samples = 1, width = 480, height = 360, seed = 0,
+    integrator = "global", hemisphere = false, russian_roulette = true, threads = None, quality = "medium",
+    watertight = false, bvh_cache = None))]
+#[allow(clippy::too_many_arguments)]
+fn render<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyAny>,
+    spp: u32,
+    max_depth: u32,
+    light_samples: u32,
+    width: usize,
+    height: usize,
+    seed: u64,
+    integrator: &str,
+    hemisphere: bool,
+    russian_roulette: bool,
+    threads: Option<usize>,
+    quality: &str,
+    watertight: bool,
+    bvh_cache: Option<PathBuf>,
+) -> PyResult<Bound<'py, PyArray3<f32>>> {
+    if width == 0 || height == 0 || width > 1 << 15 || height > 1 << 15 {
+        return Err(PyValueError::new_err(format!(
+            "width, height: expected 1 to 32768 pixels each, got {width} x {height}"
+        )));
+    }
+    if spp == 0 || light_samples == 0 {
+        return Err(PyValueError::new_err(format!(
+            "spp, light_samples: expected at least 1 each, got spp={spp}, light_samples={light_samples}"
+        )));
+    }
+    let settings = RenderSettings {
+        width,
+        height,
+        samples_per_pixel: spp,
+        light_samples,
+        max_depth,
+        hemisphere_sampling: hemisphere,
+        adaptive: None,
+        integrator: parse_integrator(integrator)?,
+        seed,
+        brute_force: false,
+        russian_roulette,
+        stream_order: None,
+    };
+    let loaded;
+    let bound;
+    let s: &PyScene = if let Ok(s) = scene.cast::<PyScene>() {
+        bound = s.clone();
+        bound.get()
+    } else if let Ok(path) = scene.extract::<PathBuf>() {
+        let build = BuildArgs::new(quality, watertight, bvh_cache, threads)?;
+        loaded = load_path(py, &path, &build)?;
+        &loaded
+    } else {
+        return Err(PyTypeError::new_err(format!(
+            "scene: expected a raypack.Scene or a path to a scene file, got {}",
+            scene.get_type().name()?
+        )));
+    };
+    let film = run_detached(py, &s.pools, threads, || {
+        let camera = s.scene.camera_or_framing(width as f32 / height as f32);
+        raypack::render::render(&s.scene, &camera, &settings, &|_| {}).film
+    })?;
+    let flat: Vec<f32> = film.pixels.iter().flat_map(|p| p.to_array()).collect();
+    PyArray1::from_vec(py, flat).reshape((height, width, 3))
+}
+
+/// The ray sets of `raypack bench` (`raypack::raysets`) at `width x height`: a dict
+/// `{"camera" | "diffuse" | "shadow": (origins, directions, tfar)}` of float32 arrays, for the
+/// benchmark script and the tests (not part of the public API).
+#[pyfunction]
+#[pyo3(signature = (scene, width, height, seed = 1))]
+fn _ray_sets<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyScene>,
+    width: usize,
+    height: usize,
+    seed: u64,
+) -> PyResult<Bound<'py, PyDict>> {
+    use raypack::raysets;
+    let s = &scene.get().scene;
+    let sets = run_detached(py, &scene.get().pools, None, || {
+        let camera = raysets::primary_for_scene(s, width, height);
+        let mut hits = vec![raypack::Hit::MISS; camera.len()];
+        s.intersect_stream(&camera, &mut hits);
+        let diffuse = raysets::diffuse_bounces(s, &camera, &hits, seed);
+        let shadow = raysets::shadow_rays(s, &camera, &hits, raysets::light_above(&s.bounds()));
+        [("camera", camera), ("diffuse", diffuse), ("shadow", shadow)]
+    })?;
+    let d = PyDict::new(py);
+    for (name, rays) in sets {
+        let k = rays.len();
+        let o: Vec<f32> = rays.iter().flat_map(|r| r.origin.to_array()).collect();
+        let dir: Vec<f32> = rays.iter().flat_map(|r| r.dir.to_array()).collect();
+        let tfar: Vec<f32> = rays.iter().map(|r| r.tfar).collect();
+        let o = PyArray1::from_vec(py, o).reshape((k, 3))?;
+        let dir = PyArray1::from_vec(py, dir).reshape((k, 3))?;
+        d.set_item(name, (o, dir, PyArray1::from_vec(py, tfar)))?;
+    }
+    Ok(d)
+}
+
+/// The rays of `Scene.intersect`'s arguments collected into one `Vec<Ray>` and traced by the
+/// library's `Scene::intersect_stream`, as a Rust caller would: `(t, prim, u, v)` with the
+/// committed scene's primitive ids. For the tests that compare the module with the Rust API
+/// (not part of the public API).
+#[pyfunction]
+#[pyo3(signature = (scene, origins, directions, tnear = 0.0, tfar = f64::INFINITY))]
+#[allow(clippy::type_complexity)]
+fn _intersect_stream<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyScene>,
+    origins: &Bound<'py, PyAny>,
+    directions: &Bound<'py, PyAny>,
+    tnear: f64,
+    tfar: f64,
+) -> PyResult<(
+    Bound<'py, PyArray1<f32>>,
+    Bound<'py, PyArray1<i64>>,
+    Bound<'py, PyArray1<f32>>,
+    Bound<'py, PyArray1<f32>>,
+)> {
+    let (tn, tf) = (tnear.into_pyobject(py)?.into_any(), tfar.into_pyobject(py)?.into_any());
+    let a = RayArgs::new(origins, directions, Some(&tn), Some(&tf))?;
+    let rays = a.rays()?;
+    let rays: Vec<raypack::Ray> = (0..rays.len).map(|i| rays.get(i)).collect();
+    let mut hits = vec![raypack::Hit::MISS; rays.len()];
+    scene.get().scene.intersect_stream(&rays, &mut hits);
+    let prim = hits.iter().map(|h| if h.is_hit() { h.prim as i64 } else { -1 }).collect();
+    Ok((
+        PyArray1::from_iter(py, hits.iter().map(|h| h.t)),
+        PyArray1::from_vec(py, prim),
+        PyArray1::from_iter(py, hits.iter().map(|h| h.u)),
+        PyArray1::from_iter(py, hits.iter().map(|h| h.v)),
+    ))
+}
+
+/// Hit locations in float64 for `raypack.trimesh` (see `trace::plane_points`): `vertices`
+/// `(N, 3)` float64 and `faces` `(M, 3)` int64 of the caller's mesh, per hit its triangle,
+/// ray and `t`, and the rays `(n, 3)` float64. Not part of the public API.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn _plane_points<'py>(
+    py: Python<'py>,
+    vertices: numpy::PyReadonlyArray2<'py, f64>,
+    faces: numpy::PyReadonlyArray2<'py, i64>,
+    tri: numpy::PyReadonlyArray1<'py, i64>,
+    ray: numpy::PyReadonlyArray1<'py, i64>,
+    t: numpy::PyReadonlyArray1<'py, f32>,
+    origins: numpy::PyReadonlyArray2<'py, f64>,
+    directions: numpy::PyReadonlyArray2<'py, f64>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let m = tri.len()?;
+    if ray.len()? != m || t.len()? != m {
+        return Err(PyValueError::new_err("tri, ray, t: expected the same length"));
+    }
+    // SAFETY: `np.empty`, every element written by `plane_points` before Python sees it.
+    let out = unsafe { PyArray2::<f64>::new(py, (m, 3), false) };
+    {
+        let mut w = out.readwrite();
+        let o = w.as_slice_mut()?;
+        let (v, f, tr, r, tt, or, di) = (
+            vertices.as_slice()?,
+            faces.as_slice()?,
+            tri.as_slice()?,
+            ray.as_slice()?,
+            t.as_slice()?,
+            origins.as_slice()?,
+            directions.as_slice()?,
+        );
+        run_detached(py, &PoolCache::default(), None, move || trace::plane_points(v, f, (tr, r, tt), (or, di), o))?
+            .map_err(PyValueError::new_err)?;
+    }
+    Ok(out)
+}
+
+/// raypack: a SIMD ray tracer (BVH8, ray packets) for numpy rays.
+#[pymodule]
+fn _raypack(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyScene>()?;
+    m.add_class::<Hits>()?;
+    m.add_function(wrap_pyfunction!(load, m)?)?;
+    m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_function(wrap_pyfunction!(_ray_sets, m)?)?;
+    m.add_function(wrap_pyfunction!(_intersect_stream, m)?)?;
+    m.add_function(wrap_pyfunction!(_plane_points, m)?)?;
+    m.add("SceneWarning", m.py().get_type::<SceneWarning>())?;
+    Ok(())
+}

@@ -1,0 +1,215 @@
+//! The parallel loops behind `Scene.intersect` / `occluded`: rays are built from the numpy
+//! arrays a chunk at a time inside each rayon task (no whole copy of the rays), traced with
+//! the scene's 16-ray packet kernels (`Scene::intersect_batch` / `occluded_batch`) and
+//! written straight into the output arrays.
+
+use crate::args::Rays;
+use rayon::prelude::*;
+use raypack::{Hit, Ray, Scene, Vec3};
+
+/// Rays per rayon task (as the library's own streams).
+pub const CHUNK: usize = 1024;
+
+/// The output arrays of a closest-hit query, one entry (three for `normal`) per ray.
+pub struct HitArrays<'a> {
+    pub t: &'a mut [f32],
+    pub prim: &'a mut [i64],
+    pub u: &'a mut [f32],
+    pub v: &'a mut [f32],
+    pub normal: &'a mut [f32],
+}
+
+/// A scene and how its primitive ids map to the ids the caller knows.
+#[derive(Clone, Copy)]
+pub struct Target<'a> {
+    pub scene: &'a Scene,
+    /// The caller's face index of each committed triangle, when the commit dropped some.
+    pub prim_map: Option<&'a [u32]>,
+}
+
+impl Target<'_> {
+    #[inline(always)]
+    fn caller_prim(&self, prim: u32) -> i64 {
+        // Only scenes built from arrays have a map, and they hold triangles only.
+        self.prim_map.and_then(|map| map.get(prim as usize)).map_or(prim as i64, |&p| p as i64)
+    }
+
+    /// The unit geometric normal at `hit` (triangles: `(v1 - v0) x (v2 - v0)`; spheres: outward).
+    #[inline(always)]
+    fn normal(&self, ray: &Ray, hit: &Hit) -> Vec3 {
+        let s = self.scene;
+        if (hit.prim as usize) < s.num_triangles() {
+            let [a, b, c] = s.triangles.vertices(hit.prim as usize);
+            // `+ 0.0` turns -0 into +0 (axis-aligned faces otherwise print as [-0, 0, 1]).
+            (b - a).cross(c - a).normalize_or(Vec3::Z) + Vec3::ZERO
+        } else {
+            s.surface(ray, hit).geometric_normal
+        }
+    }
+}
+
+/// Closest hits of `rays` into `out` (misses: `t = inf`, `prim = -1`, `u = v = 0`, normal 0).
+pub fn intersect(target: Target<'_>, rays: Rays<'_>, out: HitArrays<'_>) {
+    let HitArrays { t, prim, u, v, normal } = out;
+    (t.par_chunks_mut(CHUNK), prim.par_chunks_mut(CHUNK), u.par_chunks_mut(CHUNK), v.par_chunks_mut(CHUNK))
+        .into_par_iter()
+        .zip(normal.par_chunks_mut(3 * CHUNK))
+        .enumerate()
+        .for_each_init(
+            // Whole-chunk buffers, filled anew by every chunk (`intersect_batch` writes every hit).
+            || (vec![Ray::new(Vec3::ZERO, Vec3::X); CHUNK], vec![Hit::MISS; CHUNK]),
+            |(ray_buf, hit_buf), (k, ((t, prim, u, v), normal))| {
+                let n = t.len();
+                let (ray_buf, hit_buf) = (&mut ray_buf[..n], &mut hit_buf[..n]);
+                rays.fill(k * CHUNK, ray_buf);
+                target.scene.intersect_batch(ray_buf, hit_buf);
+                let outs = t
+                    .iter_mut()
+                    .zip(prim.iter_mut())
+                    .zip(u.iter_mut())
+                    .zip(v.iter_mut())
+                    .zip(normal.chunks_exact_mut(3));
+                for (((((t, prim), u), v), normal), (ray, hit)) in outs.zip(ray_buf.iter().zip(hit_buf.iter())) {
+                    *t = hit.t; // inf on a miss
+                    if hit.is_hit() {
+                        (*u, *v) = (hit.u, hit.v);
+                        *prim = target.caller_prim(hit.prim);
+                        normal.copy_from_slice(&target.normal(ray, hit).to_array());
+                    } else {
+                        (*u, *v, *prim) = (0.0, 0.0, -1);
+                        normal.fill(0.0);
+                    }
+                }
+            },
+        );
+}
+
+/// Whether anything blocks each of `rays` over `(tnear, tfar]`, into `out`.
+pub fn occluded(target: Target<'_>, rays: Rays<'_>, out: &mut [bool]) {
+    out.par_chunks_mut(CHUNK).enumerate().for_each_init(
+        || vec![Ray::new(Vec3::ZERO, Vec3::X); CHUNK],
+        |ray_buf, (k, out)| {
+            let ray_buf = &mut ray_buf[..out.len()];
+            rays.fill(k * CHUNK, ray_buf);
+            target.scene.occluded_batch(ray_buf, out);
+        },
+    );
+}
+
+/// All hits along each ray, nearest first, at most `max_hits` per ray.
+#[derive(Default)]
+pub struct AllHits {
+    pub ray: Vec<i64>,
+    pub prim: Vec<i64>,
+    pub t: Vec<f32>,
+    pub u: Vec<f32>,
+    pub v: Vec<f32>,
+}
+
+/// Every hit along each of `rays` (up to `max_hits`): after a hit at `t` the ray goes on
+/// from `t + min_step / |dir|`, so surfaces closer than `min_step` (a distance) behind a hit,
+/// such as the neighbour of a shared edge, are not reported twice. Ordered by ray, then `t`.
+pub fn intersect_all(target: Target<'_>, rays: Rays<'_>, max_hits: usize, min_step: f32) -> AllHits {
+    let parts: Vec<AllHits> = (0..rays.len.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|k| {
+            let (start, end) = (k * CHUNK, ((k + 1) * CHUNK).min(rays.len));
+            // Every hit as (ray within the chunk, hit), pass by pass: nearest first per ray.
+            let mut hits: Vec<(u32, Hit)> = Vec::new();
+            // The rays still going, as (index within the chunk, ray).
+            let mut live: Vec<(u32, Ray)> = (start..end).map(|i| ((i - start) as u32, rays.get(i))).collect();
+            let mut batch: Vec<Ray> = Vec::with_capacity(live.len());
+            let mut found: Vec<Hit> = Vec::with_capacity(live.len());
+            for _ in 0..max_hits {
+                if live.is_empty() {
+                    break;
+                }
+                batch.clear();
+                batch.extend(live.iter().map(|(_, r)| *r));
+                found.clear();
+                found.resize(batch.len(), Hit::MISS);
+                target.scene.intersect_batch(&batch, &mut found);
+                let mut next = 0;
+                for idx in 0..live.len() {
+                    let hit = found[idx];
+                    if !hit.is_hit() {
+                        continue;
+                    }
+                    let (j, mut ray) = live[idx];
+                    hits.push((j, hit));
+                    let step = min_step / ray.dir.length();
+                    // At least the next float above t: the interval is (tnear, tfar].
+                    ray.tnear = (hit.t + step).max(hit.t);
+                    if ray.tnear.is_finite() && ray.tnear <= ray.tfar {
+                        live[next] = (j, ray);
+                        next += 1;
+                    }
+                }
+                live.truncate(next);
+            }
+            // Ray-major; the stable sort keeps each ray's hits nearest first.
+            hits.sort_by_key(|&(j, _)| j);
+            let mut out = AllHits::default();
+            for (j, h) in hits {
+                out.ray.push((start + j as usize) as i64);
+                out.prim.push(target.caller_prim(h.prim));
+                out.t.push(h.t);
+                out.u.push(h.u);
+                out.v.push(h.v);
+            }
+            out
+        })
+        .collect();
+    let mut all = AllHits::default();
+    let total: usize = parts.iter().map(|p| p.ray.len()).sum();
+    all.ray.reserve_exact(total);
+    all.prim.reserve_exact(total);
+    all.t.reserve_exact(total);
+    all.u.reserve_exact(total);
+    all.v.reserve_exact(total);
+    for p in parts {
+        all.ray.extend(p.ray);
+        all.prim.extend(p.prim);
+        all.t.extend(p.t);
+        all.u.extend(p.u);
+        all.v.extend(p.v);
+    }
+    all
+}
+
+/// Where each hit ray meets the plane of its triangle, in float64 (as trimesh computes hit
+/// locations): `origin + s * direction` with `s` from the plane equation of the float64
+/// triangle, or `origin + t * direction` where the ray runs along the plane.
+pub fn plane_points(
+    vertices: &[f64],
+    faces: &[i64],
+    hits: (&[i64], &[i64], &[f32]),
+    rays: (&[f64], &[f64]),
+    out: &mut [f64],
+) -> Result<(), String> {
+    let (tri, ray, t) = hits;
+    let (origins, directions) = rays;
+    let row = |a: &[f64], i: usize| -> Option<[f64; 3]> { a.get(3 * i..3 * i + 3).map(|r| [r[0], r[1], r[2]]) };
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let cross =
+        |a: [f64; 3], b: [f64; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+    out.par_chunks_mut(3).enumerate().try_for_each(|(k, p)| {
+        let bad = || format!("hit {k}: triangle {} or ray {} out of range", tri[k], ray[k]);
+        let f = row_i64(faces, tri[k] as usize).ok_or_else(bad)?;
+        let [a, b, c] = f.map(|i| row(vertices, i as usize));
+        let (Some(a), Some(b), Some(c)) = (a, b, c) else { return Err(bad()) };
+        let (o, d) =
+            (row(origins, ray[k] as usize).ok_or_else(bad)?, row(directions, ray[k] as usize).ok_or_else(bad)?);
+        let n = cross(sub(b, a), sub(c, a));
+        let denom = dot(n, d);
+        let along = denom.abs() <= 1e-12 * dot(d, d).sqrt() * dot(n, n).sqrt();
+        let s = if along { t[k] as f64 } else { dot(n, sub(a, o)) / denom };
+        p.copy_from_slice(&[o[0] + s * d[0], o[1] + s * d[1], o[2] + s * d[2]]);
+        Ok(())
+    })
+}
+
+fn row_i64(a: &[i64], i: usize) -> Option<[i64; 3]> {
+    a.get(3 * i..3 * i + 3).map(|r| [r[0], r[1], r[2]])
+}

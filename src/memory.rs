@@ -1,0 +1,156 @@
+//! Memory a command will need, estimated before it starts, and memory the process may use:
+//! a size that cannot fit is refused up front instead of aborting minutes later.
+//!
+//! The estimates count the buffers that grow with the image (or ray set) size; the scene and
+//! its BVH come on top, so an estimate that barely fits may still fail.
+
+use crate::render::{PASS_SAMPLES, RenderSettings, TILE};
+
+/// Bytes per pixel that a render keeps until its image is written: the tile results
+/// ([`crate::render::adaptive::PixelEstimate`]), the film (linear RGB), the sample counts and
+/// the encoded output (8-bit RGB plus the PNG; an EXR needs twice the film), and the
+/// sample-rate image with `-a`.
+pub fn render_bytes_per_pixel(settings: &RenderSettings, exr: bool) -> u64 {
+    let estimate = std::mem::size_of::<crate::render::adaptive::PixelEstimate>();
+    let film = std::mem::size_of::<crate::math::Vec3>();
+    let output = if exr { 2 * film } else { 3 + 3 };
+    let rate = if settings.adaptive.is_some() { film + 3 + 3 } else { 0 };
+    (estimate + film + std::mem::size_of::<u32>() + output + rate) as u64
+}
+
+/// Bytes a render of `settings` on `threads` threads needs beyond the scene: every pixel
+/// ([`render_bytes_per_pixel`]) plus each thread's tile and wavefront buffers (bounded by
+/// [`PASS_SAMPLES`] and the wavefront's wave size, whatever the sample count; counted for the
+/// light samples of one area light per shading point).
+pub fn render_bytes(settings: &RenderSettings, threads: usize, exr: bool) -> u64 {
+    let pixels = settings.width as u64 * settings.height as u64;
+    let paths = TILE * TILE * PASS_SAMPLES.min(settings.samples_per_pixel.max(1)) as usize;
+    let tile = crate::render::wavefront::worker_bytes(paths, settings.light_samples.max(1) as usize)
+        + (paths * std::mem::size_of::<u32>()) as u64;
+    pixels.saturating_mul(render_bytes_per_pixel(settings, exr)).saturating_add((threads as u64).saturating_mul(tile))
+}
+
+/// Bytes per primary ray that `raypack bench` holds at once: the three ray sets (primary,
+/// diffuse bounces, shadow rays), the reference hits they are made from, and the reference
+/// and timed outputs.
+pub const BENCH_BYTES_PER_PIXEL: u64 =
+    (3 * std::mem::size_of::<crate::Ray>() + 3 * std::mem::size_of::<crate::Hit>()) as u64;
+
+/// How much memory this process may still allocate, and what says so.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Available {
+    /// Bytes.
+    pub bytes: u64,
+    /// Which limit this is: `"MemAvailable in /proc/meminfo"`, `"the cgroup memory limit"`,
+    /// `"the address-space limit (ulimit -v)"` or `"the data-segment limit (ulimit -d)"`.
+    pub source: &'static str,
+}
+
+/// The smallest of the memory the system has available, the cgroup's limit less its usage,
+/// and the process's address-space and data limits less what it uses; `None` where none of
+/// these can be read (not Linux).
+pub fn available() -> Option<Available> {
+    let mut best: Option<Available> = None;
+    let mut offer = |bytes: Option<u64>, source: &'static str| {
+        if let Some(bytes) = bytes {
+            if best.as_ref().is_none_or(|b| bytes < b.bytes) {
+                best = Some(Available { bytes, source });
+            }
+        }
+    };
+    let meminfo = std::fs::read_to_string("/proc/meminfo").ok();
+    offer(meminfo.as_deref().and_then(|m| kib_field(m, "MemAvailable:")), "MemAvailable in /proc/meminfo");
+    offer(cgroup_room(), "the cgroup memory limit");
+    let status = std::fs::read_to_string("/proc/self/status").ok();
+    let used = |field| status.as_deref().and_then(|s| kib_field(s, field)).unwrap_or(0);
+    #[cfg(unix)]
+    {
+        // The soft limit of a resource, when it is finite.
+        let rlimit = |resource| {
+            let mut lim = libc::rlimit { rlim_cur: 0, rlim_max: 0 };
+            // SAFETY: getrlimit writes the struct passed by pointer, which lives on this frame.
+            let ok = unsafe { libc::getrlimit(resource, &mut lim) } == 0;
+            #[allow(clippy::unnecessary_cast)] // `rlim_t` is `u64` on Linux, not everywhere.
+            (ok && lim.rlim_cur != libc::RLIM_INFINITY).then_some(lim.rlim_cur as u64)
+        };
+        let (address_space, data) = (rlimit(libc::RLIMIT_AS), rlimit(libc::RLIMIT_DATA));
+        offer(address_space.map(|l| l.saturating_sub(used("VmSize:"))), "the address-space limit (ulimit -v)");
+        offer(data.map(|l| l.saturating_sub(used("VmData:"))), "the data-segment limit (ulimit -d)");
+    }
+    #[cfg(not(unix))]
+    let _ = used;
+    best
+}
+
+/// A `NAME: N kB` field of a `/proc` file, in bytes.
+fn kib_field(text: &str, name: &str) -> Option<u64> {
+    let line = text.lines().find(|l| l.starts_with(name))?;
+    let kib: u64 = line[name.len()..].split_whitespace().next()?.parse().ok()?;
+    Some(kib.saturating_mul(1024))
+}
+
+/// What the memory cgroup of this process still allows (v2 `memory.max` less
+/// `memory.current`, or v1 `memory.limit_in_bytes` less `memory.usage_in_bytes`).
+fn cgroup_room() -> Option<u64> {
+    let read = |p: &str| std::fs::read_to_string(p).ok()?.trim().parse::<u64>().ok();
+    let groups = std::fs::read_to_string("/proc/self/cgroup").ok()?;
+    let v2 = groups.lines().find_map(|l| l.strip_prefix("0::"));
+    let v1 = groups.lines().find_map(|l| {
+        let mut f = l.splitn(3, ':');
+        let (_, controllers, path) = (f.next()?, f.next()?, f.next()?);
+        controllers.split(',').any(|c| c == "memory").then_some(path)
+    });
+    let candidates = [
+        v2.map(|p| (format!("/sys/fs/cgroup{p}/memory.max"), format!("/sys/fs/cgroup{p}/memory.current"))),
+        v1.map(|p| {
+            (
+                format!("/sys/fs/cgroup/memory{p}/memory.limit_in_bytes"),
+                format!("/sys/fs/cgroup/memory{p}/memory.usage_in_bytes"),
+            )
+        }),
+        Some((
+            "/sys/fs/cgroup/memory/memory.limit_in_bytes".into(),
+            "/sys/fs/cgroup/memory/memory.usage_in_bytes".into(),
+        )),
+    ];
+    // "max" (v2) does not parse; v1 writes a number near 2^63 for "no limit".
+    candidates.into_iter().flatten().find_map(|(limit, usage)| {
+        let limit = read(&limit).filter(|&l| l < 1 << 60)?;
+        Some(limit.saturating_sub(read(&usage).unwrap_or(0)))
+    })
+}
+
+/// Formats a byte count for messages: "75.2 GB".
+pub fn human(bytes: u64) -> String {
+    let b = bytes as f64;
+    match bytes {
+        0..1_000_000 => format!("{:.1} kB", b / 1e3),
+        1_000_000..1_000_000_000 => format!("{:.1} MB", b / 1e6),
+        _ => format!("{:.1} GB", b / 1e9),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn render_estimate_grows_with_pixels_not_samples() {
+        let small = RenderSettings { width: 16, height: 16, samples_per_pixel: 1, ..RenderSettings::default() };
+        let many = RenderSettings { samples_per_pixel: u32::MAX, adaptive: Some((u32::MAX, 0.05)), ..small.clone() };
+        // Two workers' wavefronts of a 16-sample pass (4096 paths each): under 1 MB apiece.
+        assert!(render_bytes(&many, 2, false) < 2 << 20, "{}", render_bytes(&many, 2, false));
+        let huge = RenderSettings { width: 32768, height: 32768, ..small };
+        let bytes = render_bytes(&huge, 2, false);
+        assert!(bytes > 60_000_000_000 && bytes < 100_000_000_000, "{}", human(bytes));
+    }
+
+    #[test]
+    fn proc_fields_parse() {
+        assert_eq!(kib_field("MemTotal: 10 kB\nMemAvailable:    7 kB\n", "MemAvailable:"), Some(7 * 1024));
+        assert_eq!(kib_field("x", "MemAvailable:"), None);
+        if cfg!(target_os = "linux") {
+            assert!(available().is_some_and(|a| a.bytes > 0));
+        }
+    }
+}
