@@ -1,5 +1,6 @@
 //! Compares two linear images (OpenEXR, as `raypack render -f NAME.exr` writes them): the mean
-//! of each and the root-mean-square difference between them, over all pixels and channels.
+//! of each, the root-mean-square difference between them over all pixels and channels, and
+//! how many pixels are the same bit for bit.
 //! Two renders of one scene with different seeds give the renderer's noise (RMSE = √2 σ).
 //!
 //! `cargo run --release --example image_rmse -- a.exr b.exr`
@@ -43,6 +44,18 @@ fn main() -> ExitCode {
     let n = (a.2.len() * 3) as f64;
     let mean = |px: &[[f32; 3]]| px.iter().flatten().map(|&v| v as f64).sum::<f64>() / n;
     let sq: f64 = a.2.iter().flatten().zip(b.2.iter().flatten()).map(|(&x, &y)| (x as f64 - y as f64).powi(2)).sum();
-    println!("mean_a {:.6} mean_b {:.6} rmse {:.6}", mean(&a.2), mean(&b.2), (sq / n).sqrt());
+    if let Some((i, (x, y))) =
+        a.2.iter().zip(&b.2).enumerate().find(|(_, (x, y))| x.map(f32::to_bits) != y.map(f32::to_bits))
+    {
+        eprintln!("first different pixel: ({}, {}): {x:?} and {y:?}", i % a.0, i / a.0);
+    }
+    let same = a.2.iter().zip(&b.2).filter(|(x, y)| x.map(f32::to_bits) == y.map(f32::to_bits)).count();
+    println!(
+        "mean_a {:.6} mean_b {:.6} rmse {:.6} bit_identical_pixels {same}/{}",
+        mean(&a.2),
+        mean(&b.2),
+        (sq / n).sqrt(),
+        a.2.len()
+    );
     ExitCode::SUCCESS
 }
