@@ -52,10 +52,10 @@ impl RayQueue {
     pub fn retain(&mut self, keep: &[bool]) {
         debug_assert_eq!(keep.len(), self.len());
         let mut n = 0;
-        for i in 0..self.rays.len() {
+        for (i, &k) in keep.iter().enumerate() {
             self.rays[n] = self.rays[i];
             self.owner[n] = self.owner[i];
-            n += keep[i] as usize;
+            n += k as usize;
         }
         self.rays.truncate(n);
         self.owner.truncate(n);

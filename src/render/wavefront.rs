@@ -80,20 +80,28 @@ impl Wavefront {
         let Capacity { paths, wave, samples } = Capacity::of(paths, integrator.direct_samples_per_point() as usize);
         room(&mut self.paths, paths);
         let c = &mut self.camera;
-        (room(&mut c.rays, paths), room(&mut c.owner, paths), room(&mut c.hits, paths));
+        room(&mut c.rays, paths);
+        room(&mut c.owner, paths);
+        room(&mut c.hits, paths);
         room(&mut self.alive, wave);
         room(&mut self.surfaces, wave);
         room(&mut self.scatter, wave);
         room(&mut self.direct.points, wave);
         room(&mut self.direct.samples, samples);
         let q = &mut self.queue;
-        (room(&mut q.rays, wave), room(&mut q.owner, wave), room(&mut q.hits, wave));
+        room(&mut q.rays, wave);
+        room(&mut q.owner, wave);
+        room(&mut q.hits, wave);
         // Shadow rays (light sampling) or hemisphere rays (`-H`): one kind per render.
         let s = &mut self.direct.shadow;
-        (room(&mut s.rays, samples), room(&mut s.owner, samples), room(&mut s.occluded, samples));
+        room(&mut s.rays, samples);
+        room(&mut s.owner, samples);
+        room(&mut s.occluded, samples);
         let p = &mut self.direct.probes;
         if integrator.hemisphere_sampling() {
-            (room(&mut p.rays, samples), room(&mut p.owner, samples), room(&mut p.hits, samples));
+            room(&mut p.rays, samples);
+            room(&mut p.owner, samples);
+            room(&mut p.hits, samples);
         }
         self.scratch.reserve(samples.max(wave));
     }
