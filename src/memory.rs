@@ -23,16 +23,15 @@ pub fn render_bytes_per_pixel(settings: &RenderSettings, exr: bool) -> u64 {
 }
 
 /// Bytes a render of `settings` on `threads` threads needs beyond the scene: every pixel
-/// ([`render_bytes_per_pixel`]) plus each thread's tile buffers (bounded by
-/// [`PASS_SAMPLES`], whatever the sample count).
+/// ([`render_bytes_per_pixel`]) plus each thread's tile and wavefront buffers (bounded by
+/// [`PASS_SAMPLES`] and the wavefront's wave size, whatever the sample count; counted for the
+/// light samples of one area light per shading point).
 pub fn render_bytes(settings: &RenderSettings, threads: usize, exr: bool) -> u64 {
     let pixels = settings.width as u64 * settings.height as u64;
-    let per_sample = std::mem::size_of::<crate::Ray>()
-        + std::mem::size_of::<crate::rng::Rng>()
-        + std::mem::size_of::<u32>()
-        + std::mem::size_of::<crate::Hit>();
-    let tile = (TILE * TILE) as u64 * PASS_SAMPLES.min(settings.samples_per_pixel.max(1)) as u64 * per_sample as u64;
-    pixels.saturating_mul(render_bytes_per_pixel(settings, exr)).saturating_add(threads as u64 * tile)
+    let paths = TILE * TILE * PASS_SAMPLES.min(settings.samples_per_pixel.max(1)) as usize;
+    let tile = crate::render::wavefront::worker_bytes(paths, settings.light_samples.max(1) as usize)
+        + (paths * std::mem::size_of::<u32>()) as u64;
+    pixels.saturating_mul(render_bytes_per_pixel(settings, exr)).saturating_add((threads as u64).saturating_mul(tile))
 }
 
 /// Bytes per primary ray that `raypack bench` holds at once: the three ray sets (primary,
@@ -189,7 +188,8 @@ mod tests {
     fn render_estimate_grows_with_pixels_not_samples() {
         let small = RenderSettings { width: 16, height: 16, samples_per_pixel: 1, ..RenderSettings::default() };
         let many = RenderSettings { samples_per_pixel: u32::MAX, adaptive: Some((u32::MAX, 0.05)), ..small.clone() };
-        assert!(render_bytes(&many, 2, false) < 1 << 20, "{}", render_bytes(&many, 2, false));
+        // Two workers' wavefronts of a 16-sample pass (4096 paths each): under 1 MB apiece.
+        assert!(render_bytes(&many, 2, false) < 2 << 20, "{}", render_bytes(&many, 2, false));
         let huge = RenderSettings { width: 32768, height: 32768, ..small };
         let bytes = render_bytes(&huge, 2, false);
         assert!(bytes > 60_000_000_000 && bytes < 100_000_000_000, "{}", human(bytes));

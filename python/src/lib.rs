@@ -550,6 +550,7 @@ fn render<'py>(
         seed,
         brute_force: false,
         russian_roulette,
+        stream_order: None,
     };
     let loaded;
     let bound;

@@ -1,11 +1,13 @@
 //! Integrators: the radiance a camera ray brings back (CS184 parts 3–4; pbrt-v4's
 //! `PathIntegrator` without multiple importance sampling).
 //!
-//! A path is traced iteratively. At each non-specular hit, direct lighting is estimated either
-//! by sampling the lights (`-l` samples per area light, one per delta light) and tracing shadow
-//! rays, or (`-H`) by tracing uniformly distributed hemisphere rays and adding the emission
-//! they find (as many as light sampling would trace). The path then continues in a direction
-//! drawn from the BSDF. Emission met by the continuation is counted only right after the
+//! A path advances one bounce at a time, in two steps the wavefront ([`super::wavefront`])
+//! runs over a whole batch of paths: [`Integrator::shade`] and [`Integrator::scatter`]; the
+//! rays they ask for are traced between the steps, many paths' at once. At each non-specular
+//! hit, direct lighting is estimated either by sampling the lights (`-l` samples per area
+//! light, one per delta light) and tracing shadow rays, or (`-H`) by tracing uniformly
+//! distributed hemisphere rays and adding the emission they find (as many as light sampling
+//! would trace). The path then continues in a direction drawn from the BSDF. Emission met by the continuation is counted only right after the
 //! camera or a specular bounce (mirror, glass): everywhere else direct lighting has already
 //! accounted for it. Light is split by bounces: `k` bounces is light scattered `k` times on
 //! its way to the camera (0: emission seen directly; 1: direct lighting). Each integrator
@@ -18,10 +20,10 @@
 use super::bsdf;
 use super::frame::Frame;
 use super::light::{LightContext, LightSet, SampledLight};
+use super::queue::{DirectQueue, DirectSample};
 use super::sampler::Rng;
 use super::sampling::{UNIFORM_HEMISPHERE_PDF, uniform_hemisphere};
 use super::spawn::{spawn_ray, spawn_ray_infinite, spawn_ray_to};
-use super::stats::{RayKind, RayLog};
 use super::trace::Tracer;
 use super::{Encoding, RenderSettings};
 use crate::math::Vec3;
@@ -72,6 +74,45 @@ impl IntegratorKind {
 /// Russian roulette starts at this many bounces.
 const ROULETTE_START: u32 = 2;
 
+/// The direct-lighting group of uniform hemisphere samples (`-H`); light sampling's groups
+/// are the lights' indices.
+pub const HEMISPHERE: u32 = u32::MAX;
+
+/// Where a path scatters at a surface: the shading frame there and the direction toward
+/// where the path came from, in that frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Scatter {
+    /// Shading frame (`z`: the shading normal).
+    pub frame: Frame,
+    /// Unit direction back along the incoming ray, local to `frame`.
+    pub wo: Vec3,
+}
+
+/// A path between two bounces: the light it has gathered and what it carries on.
+#[derive(Clone, Debug)]
+pub struct PathState {
+    /// Radiance gathered so far.
+    pub l: Vec3,
+    /// Throughput: what light arriving along the path's next ray is multiplied by.
+    pub beta: Vec3,
+    /// Product of the radiance scalings of the interfaces crossed (pbrt's `etaScale`).
+    pub eta_scale: f32,
+    /// Scattering events so far.
+    pub depth: u32,
+    /// True after the camera or a specular bounce: emission met next is counted.
+    pub sees_emission: bool,
+    /// The path's own random numbers.
+    pub rng: Rng,
+}
+
+impl PathState {
+    /// A path leaving the camera, drawing from `rng`.
+    #[inline]
+    pub fn new(rng: Rng) -> Self {
+        Self { l: Vec3::ZERO, beta: Vec3::ONE, eta_scale: 1.0, depth: 0, sees_emission: true, rng }
+    }
+}
+
 /// An integrator bound to a scene and settings.
 pub struct Integrator<'a> {
     scene: &'a Scene,
@@ -109,70 +150,154 @@ impl<'a> Integrator<'a> {
         &self.lights
     }
 
-    /// Radiance arriving along camera ray `ray` whose closest hit is `hit`; random numbers
-    /// from `rng`; rays traced are logged in `log`.
-    pub fn radiance(&self, ray: &Ray, hit: &Hit, rng: &mut Rng, log: &mut RayLog) -> Vec3 {
-        let Some((lo, hi)) = self.bounces else {
-            return if hit.is_hit() { self.scene.surface(ray, hit).shading_normal * 0.5 + 0.5 } else { Vec3::ZERO };
-        };
-        if lo > hi {
-            return Vec3::ZERO;
+    /// The range of bounces counted, `None` for [`IntegratorKind::Normals`].
+    pub fn bounces(&self) -> Option<(u32, u32)> {
+        self.bounces
+    }
+
+    /// Most direct-lighting samples (so shadow or hemisphere rays) one shading point queues.
+    pub fn direct_samples_per_point(&self) -> u32 {
+        self.hemisphere_samples
+    }
+
+    /// True when direct lighting traces uniform hemisphere rays (`-H`) rather than shadow rays.
+    pub fn hemisphere_sampling(&self) -> bool {
+        self.settings.hemisphere_sampling
+    }
+
+    /// True when camera rays start paths to [`Integrator::shade`]; false when the camera ray's
+    /// hit alone decides ([`Integrator::camera_only`]).
+    pub fn traces_paths(&self) -> bool {
+        matches!(self.bounces, Some((lo, hi)) if lo <= hi)
+    }
+
+    /// The value of camera ray `ray` with closest hit `hit` when no path is traced from it:
+    /// the normal map for [`IntegratorKind::Normals`], black when no bounce is counted.
+    pub fn camera_only(&self, ray: &Ray, hit: &Hit) -> Vec3 {
+        if self.bounces.is_none() && hit.is_hit() {
+            self.scene.surface(ray, hit).shading_normal * 0.5 + 0.5
+        } else {
+            Vec3::ZERO
         }
+    }
+
+    /// The first half of one step of `path`, whose last ray `ray` found `hit`: adds the
+    /// emission seen there and queues the hit's direct-lighting samples in `direct` (traced and
+    /// added later: [`Integrator::direct_total`]). Returns where the path scatters next, or
+    /// `None` when it ends here. [`Integrator::scatter`] is the second half.
+    ///
+    /// `surface` is [`Scene::surface`] at `hit` (ignored for a miss): the wavefront computes it
+    /// for a whole batch first, where the loads of many hits overlap. Random numbers are drawn
+    /// from the path's own generator in a fixed order (light samples, then BSDF, then
+    /// roulette), so a path's value does not depend on which paths are shaded with it.
+    #[inline]
+    pub fn shade(
+        &self,
+        path: &mut PathState,
+        ray: &Ray,
+        hit: &Hit,
+        surface: &SurfaceHit,
+        direct: &mut DirectQueue,
+        id: u32,
+    ) -> Option<Scatter> {
+        let (lo, hi) = self.bounces?;
         let counted = |k: u32| lo <= k && k <= hi;
-        let mut l = Vec3::ZERO;
-        let mut beta = Vec3::ONE;
-        let mut eta_scale = 1.0f32;
-        let (mut ray, mut hit) = (*ray, *hit);
-        let mut depth = 0u32; // scattering events so far
-        let mut sees_emission = true; // camera ray or a specular bounce
-        loop {
-            if !hit.is_hit() {
-                if sees_emission && counted(depth) {
-                    l += beta * self.lights.environment;
-                }
-                break;
+        if !hit.is_hit() {
+            if path.sees_emission && counted(path.depth) {
+                path.l += path.beta * self.lights.environment;
             }
-            let s = self.scene.surface(&ray, &hit);
-            let mat = self.material(hit.prim);
-            if sees_emission && counted(depth) {
-                l += beta * self.lights.emitted(hit.prim, mat.emission, ray.dir);
-            }
-            let delta = bsdf::is_delta(&mat.bsdf);
-            let frame = Frame::from_normal(s.shading_normal);
-            let wo = frame.to_local(-ray.dir);
-            // Direct lighting here is light with one more bounce.
-            if !delta && counted(depth + 1) && wo.z != 0.0 {
-                l += beta * self.direct(&s, &mat.bsdf, &frame, wo, rng, log);
-            }
-            // The continuation only brings light with at least this many bounces.
-            let next = if delta { depth + 1 } else { depth + 2 };
-            if next > hi {
-                break;
-            }
-            let Some(bs) = bsdf::sample_f(&mat.bsdf, wo, rng.next_2d(), rng.next_f32()) else {
-                break;
-            };
-            beta *= bs.weight;
-            eta_scale *= bs.eta_scale;
-            if beta.max_element() <= 0.0 {
-                break;
-            }
-            depth += 1;
-            sees_emission = bs.delta;
-            if self.settings.russian_roulette && depth >= ROULETTE_START {
-                let q = (beta * eta_scale).max_element();
-                if q < 1.0 {
-                    if rng.next_f32() >= q {
-                        break;
-                    }
-                    beta /= q;
-                }
-            }
-            ray = spawn_ray(s.position, s.geometric_normal, frame.to_world(bs.wi));
-            log.record(RayKind::Bounce, &ray);
-            hit = self.tracer.closest(&ray);
+            return None;
         }
-        l
+        let s = surface;
+        let mat = &self.scene.materials[s.material as usize];
+        if path.sees_emission && counted(path.depth) {
+            path.l += path.beta * self.lights.emitted(hit.prim, mat.emission, ray.dir);
+        }
+        let delta = bsdf::is_delta(&mat.bsdf);
+        let frame = Frame::from_normal(s.shading_normal);
+        let wo = frame.to_local(-ray.dir);
+        // Direct lighting here is light with one more bounce.
+        if !delta && counted(path.depth + 1) && wo.z != 0.0 {
+            direct.begin(id, path.beta);
+            if self.settings.hemisphere_sampling {
+                self.queue_hemisphere(s, &mat.bsdf, &frame, wo, &mut path.rng, direct);
+            } else {
+                self.queue_lights(s, &mat.bsdf, &frame, wo, &mut path.rng, direct);
+            }
+        }
+        // The continuation only brings light with at least this many bounces.
+        let next = if delta { path.depth + 1 } else { path.depth + 2 };
+        (next <= hi).then_some(Scatter { frame, wo })
+    }
+
+    /// The second half of a step ([`Integrator::shade`]): samples the BSDF at `surface` and
+    /// plays Russian roulette. Returns the continuation ray, or `None` when the path ends.
+    #[inline]
+    pub fn scatter(&self, path: &mut PathState, surface: &SurfaceHit, at: &Scatter) -> Option<Ray> {
+        let (s, Scatter { frame, wo }) = (surface, *at);
+        let rng = &mut path.rng;
+        let bsdf = &self.scene.materials[s.material as usize].bsdf;
+        let bs = bsdf::sample_f(bsdf, wo, rng.next_2d(), rng.next_f32())?;
+        path.beta *= bs.weight;
+        path.eta_scale *= bs.eta_scale;
+        if path.beta.max_element() <= 0.0 {
+            return None;
+        }
+        path.depth += 1;
+        path.sees_emission = bs.delta;
+        if self.settings.russian_roulette && path.depth >= ROULETTE_START {
+            let q = (path.beta * path.eta_scale).max_element();
+            if q < 1.0 {
+                if rng.next_f32() >= q {
+                    return None;
+                }
+                path.beta /= q;
+            }
+        }
+        Some(spawn_ray(s.position, s.geometric_normal, frame.to_world(bs.wi)))
+    }
+
+    /// The direct lighting of one shading point from its samples `samples`, in the order
+    /// [`Integrator::shade`] queued them, once their rays are answered: each light's (or the
+    /// hemisphere's) visible samples summed and divided by its sample count, summed over lights.
+    #[inline]
+    pub fn direct_total(&self, samples: &[DirectSample]) -> Vec3 {
+        let mut total = Vec3::ZERO;
+        let mut i = 0;
+        while i < samples.len() {
+            let group = samples[i].group;
+            let mut sum = Vec3::ZERO;
+            while i < samples.len() && samples[i].group == group {
+                let d = &samples[i];
+                if d.visible {
+                    sum += d.f * d.radiance * d.scale;
+                }
+                i += 1;
+            }
+            total += sum / self.group_samples(group) as f32;
+        }
+        total
+    }
+
+    /// Radiance a hemisphere ray of direction `dir` brings from its closest hit `hit`.
+    #[inline]
+    pub fn probe_radiance(&self, hit: &Hit, dir: Vec3) -> Vec3 {
+        if hit.is_hit() {
+            self.lights.emitted(hit.prim, self.material(hit.prim).emission, dir)
+        } else {
+            self.lights.environment
+        }
+    }
+
+    /// Samples per shading point of direct-lighting group `group` (a light's index, or
+    /// [`HEMISPHERE`]).
+    #[inline]
+    fn group_samples(&self, group: u32) -> u32 {
+        match self.lights.lights.get(group as usize) {
+            Some(l) if l.is_delta() => 1,
+            Some(_) => self.settings.light_samples.max(1),
+            None => self.hemisphere_samples,
+        }
     }
 
     #[inline]
@@ -183,31 +308,12 @@ impl<'a> Integrator<'a> {
         &self.scene.materials[id as usize]
     }
 
-    /// Direct lighting toward `wo` (local to `frame`) at the non-specular surface `s`.
-    fn direct(&self, s: &SurfaceHit, b: &Bsdf, frame: &Frame, wo: Vec3, rng: &mut Rng, log: &mut RayLog) -> Vec3 {
-        if self.settings.hemisphere_sampling {
-            self.direct_hemisphere(s, b, frame, wo, rng, log)
-        } else {
-            self.direct_lights(s, b, frame, wo, rng, log)
-        }
-    }
-
     /// CS184 `estimate_direct_lighting_importance`: `-l` samples of each area light, one of
-    /// each delta light, one shadow ray each.
-    fn direct_lights(
-        &self,
-        s: &SurfaceHit,
-        b: &Bsdf,
-        frame: &Frame,
-        wo: Vec3,
-        rng: &mut Rng,
-        log: &mut RayLog,
-    ) -> Vec3 {
+    /// each delta light, each with a shadow ray (none when the light touches the point).
+    fn queue_lights(&self, s: &SurfaceHit, b: &Bsdf, frame: &Frame, wo: Vec3, rng: &mut Rng, out: &mut DirectQueue) {
         let ctx = LightContext { p: s.position, n: frame.z * wo.z.signum() };
-        let mut total = Vec3::ZERO;
-        for light in &self.lights.lights {
+        for (group, light) in self.lights.lights.iter().enumerate() {
             let n = if light.is_delta() { 1 } else { self.settings.light_samples.max(1) };
-            let mut sum = Vec3::ZERO;
             for _ in 0..n {
                 let u = rng.next_2d();
                 let Some(ls) = light.sample(self.scene, &ctx, u) else { continue };
@@ -220,54 +326,39 @@ impl<'a> Integrator<'a> {
                     Some(q) => spawn_ray_to(s.position, s.geometric_normal, q),
                     None => Some(spawn_ray_infinite(s.position, s.geometric_normal, ls.wi)),
                 };
-                if let Some(r) = shadow {
-                    log.record(RayKind::Shadow, &r);
-                    if self.tracer.occluded(&r) {
-                        continue;
-                    }
-                }
-                sum += f * ls.radiance * (wi.z.abs() / ls.pdf);
+                let sample = DirectSample {
+                    f,
+                    radiance: ls.radiance,
+                    scale: wi.z.abs() / ls.pdf,
+                    group: group as u32,
+                    visible: true,
+                };
+                out.push_light(sample, shadow);
             }
-            total += sum / n as f32;
         }
-        total
     }
 
     /// CS184 `estimate_direct_lighting_hemisphere`: uniform directions on the hemisphere of
-    /// `wo`, each traced to whatever it hits, adding that surface's (or the environment's)
-    /// emission.
-    fn direct_hemisphere(
+    /// `wo`, each traced to whatever it hits, whose (or the environment's) emission it brings.
+    fn queue_hemisphere(
         &self,
         s: &SurfaceHit,
         b: &Bsdf,
         frame: &Frame,
         wo: Vec3,
         rng: &mut Rng,
-        log: &mut RayLog,
-    ) -> Vec3 {
-        let n = self.hemisphere_samples;
-        if n == 0 {
-            return Vec3::ZERO;
-        }
-        let mut sum = Vec3::ZERO;
-        for _ in 0..n {
+        out: &mut DirectQueue,
+    ) {
+        for _ in 0..self.hemisphere_samples {
             let mut wi = uniform_hemisphere(rng.next_2d());
             wi.z = wi.z.copysign(wo.z);
             let f = bsdf::f(b, wo, wi);
             if f == Vec3::ZERO {
                 continue;
             }
-            let dir = frame.to_world(wi);
-            let r = spawn_ray(s.position, s.geometric_normal, dir);
-            log.record(RayKind::Bounce, &r);
-            let h = self.tracer.closest(&r);
-            let le = if h.is_hit() {
-                self.lights.emitted(h.prim, self.material(h.prim).emission, dir)
-            } else {
-                self.lights.environment
-            };
-            sum += f * le * (wi.z.abs() / UNIFORM_HEMISPHERE_PDF);
+            let ray = spawn_ray(s.position, s.geometric_normal, frame.to_world(wi));
+            let scale = wi.z.abs() / UNIFORM_HEMISPHERE_PDF;
+            out.push_probe(DirectSample { f, radiance: Vec3::ZERO, scale, group: HEMISPHERE, visible: true }, ray);
         }
-        sum / n as f32
     }
 }

@@ -1,11 +1,12 @@
 //! The renderer: tile-parallel image formation over a committed [`Scene`].
 //!
-//! Pixels are split into square tiles rendered by rayon tasks, each with its own buffers and
-//! counters (no locks, no allocation per sample). A tile is rendered in passes: each pass
-//! generates a batch of camera rays for the pixels still sampling, traces them in one call
-//! ([`trace::Tracer::closest_batch`]) and shades them. Each sample `s` of pixel `p` draws its
-//! random numbers from its own generator seeded by `(seed, p, s)`, so the image is a pure
-//! function of the scene, the settings and the seed, whatever the thread count.
+//! Pixels are split into square tiles rendered by rayon tasks, each worker with its own
+//! buffers and counters (no locks, no allocation per sample). A tile is rendered in passes:
+//! each pass generates a batch of camera rays for the pixels still sampling and traces their
+//! paths together, one bounce at a time, every kind of ray in one stream through the packet
+//! kernels ([`wavefront`]). Each sample `s` of pixel `p` draws its random numbers from its own
+//! generator seeded by `(seed, p, s)`, so the image is a pure function of the scene, the
+//! settings and the seed, whatever the thread count.
 
 pub mod adaptive;
 pub mod bsdf;
@@ -14,18 +15,23 @@ pub mod film;
 pub mod frame;
 pub mod integrator;
 pub mod light;
+pub mod order;
+pub mod queue;
 pub mod sampler;
 pub mod sampling;
 pub mod spawn;
 pub mod stats;
 pub mod trace;
+pub mod wavefront;
 
 pub use film::{Encoding, Film, ImageError, ImageFormat};
 pub use integrator::IntegratorKind;
+pub use order::RayOrder;
 pub use stats::{RayCounts, RayKind, RayLog};
+pub use wavefront::{PhaseTimes, StreamOrder};
 
 use crate::math::Vec3;
-use crate::ray::{Hit, Ray};
+use crate::ray::Ray;
 use crate::scene::{Camera, Scene};
 use adaptive::PixelEstimate;
 use sampler::Rng;
@@ -60,6 +66,10 @@ pub struct RenderSettings {
     pub brute_force: bool,
     /// Terminate paths by Russian roulette from the second bounce on (unbiased).
     pub russian_roulette: bool,
+    /// How secondary rays are ordered before they are traced; `None`: what was measured
+    /// fastest for the scene's kernels ([`StreamOrder::default_for`]). The image is the same
+    /// whatever the order.
+    pub stream_order: Option<StreamOrder>,
 }
 
 impl Default for RenderSettings {
@@ -76,6 +86,7 @@ impl Default for RenderSettings {
             seed: 0,
             brute_force: false,
             russian_roulette: true,
+            stream_order: None,
         }
     }
 }
@@ -93,10 +104,8 @@ pub struct RenderStats {
     pub invalid_samples: u64,
     /// Wall-clock time of the render.
     pub time: Duration,
-    /// Thread time spent generating and tracing camera rays.
-    pub camera_time: Duration,
-    /// Thread time spent shading (including shadow and bounce rays).
-    pub shading_time: Duration,
+    /// Thread time of each phase (summed over threads).
+    pub phases: PhaseTimes,
 }
 
 /// The result of a render.
@@ -131,10 +140,11 @@ pub fn render(
     let done = AtomicU64::new(0);
     let integrator = integrator::Integrator::new(scene, settings);
     let camera = camera::CameraRays::new(camera);
+    let order = settings.stream_order.unwrap_or_else(|| StreamOrder::default_for(scene.isa()));
     let rendered: Vec<TileResult> = tiles
         .par_iter()
-        .map(|&(tx, ty)| {
-            let r = render_tile(&integrator, &camera, settings, tx, ty);
+        .map_init(wavefront::Wavefront::new, |wf, &(tx, ty)| {
+            let r = render_tile(&integrator, &camera, settings, order, wf, tx, ty);
             progress(done.fetch_add(1, Ordering::Relaxed) + 1);
             r
         })
@@ -146,8 +156,7 @@ pub fn render(
     for (&(tx, ty), tile) in tiles.iter().zip(rendered) {
         log.merge(tile.log);
         stats.invalid_samples += tile.invalid_samples;
-        stats.camera_time += tile.camera_time;
-        stats.shading_time += tile.shading_time;
+        stats.phases += tile.phases;
         let (x0, y0) = (tx * TILE, ty * TILE);
         let tw = TILE.min(w - x0);
         for (i, est) in tile.pixels.iter().enumerate() {
@@ -167,8 +176,7 @@ struct TileResult {
     pixels: Vec<PixelEstimate>,
     log: RayLog,
     invalid_samples: u64,
-    camera_time: Duration,
-    shading_time: Duration,
+    phases: PhaseTimes,
 }
 
 /// The random number stream of sample `sample` of pixel `pixel`.
@@ -181,6 +189,8 @@ fn render_tile(
     integrator: &integrator::Integrator,
     camera: &camera::CameraRays,
     settings: &RenderSettings,
+    order: StreamOrder,
+    wavefront: &mut wavefront::Wavefront,
     tx: usize,
     ty: usize,
 ) -> TileResult {
@@ -199,14 +209,13 @@ fn render_tile(
     let pass = PASS_SAMPLES.min(spp);
     let centre_only = spp == 1;
     let mut pixels = vec![PixelEstimate::default(); npix];
-    // Per-pass buffers, sized once for the largest pass.
+    // Per-pass buffers, sized for the largest pass (the wavefront's are kept by the worker).
     let cap = npix * pass as usize;
-    let mut rays: Vec<Ray> = Vec::with_capacity(cap);
-    let mut rngs: Vec<Rng> = Vec::with_capacity(cap);
+    wavefront.reserve(cap, integrator);
     let mut owner: Vec<u32> = Vec::with_capacity(cap);
-    let mut hits: Vec<Hit> = Vec::with_capacity(cap);
     let mut log = RayLog::default();
-    let (mut invalid, mut camera_time, mut shading_time) = (0u64, Duration::ZERO, Duration::ZERO);
+    let mut phases = PhaseTimes::default();
+    let mut invalid = 0u64;
     // Every pixel still sampling has taken `taken` samples: all start together and a batch
     // adds the same number to each.
     let mut taken = 0u32;
@@ -215,8 +224,7 @@ fn render_tile(
         while taken < batch_end {
             let pass_end = taken.saturating_add(pass).min(batch_end);
             let t0 = Instant::now();
-            rays.clear();
-            rngs.clear();
+            wavefront.clear();
             owner.clear();
             for (i, est) in pixels.iter().enumerate() {
                 if est.done {
@@ -229,30 +237,28 @@ fn render_tile(
                     let (jx, jy) = if centre_only { (0.5, 0.5) } else { rng.next_2d() };
                     let ray = camera.ray(x as f32 + jx, y as f32 + jy, w, h);
                     log.record(RayKind::Camera, &ray);
-                    rays.push(ray);
-                    rngs.push(rng);
+                    wavefront.push_camera(ray, rng);
                     owner.push(i as u32);
                 }
             }
-            hits.clear();
-            hits.resize(rays.len(), Hit::MISS);
-            integrator.tracer().closest_batch(&rays, &mut hits);
+            phases.generate += t0.elapsed();
+            wavefront.run(integrator, order, &mut log, &mut phases);
             let t1 = Instant::now();
-            for ((ray, hit), (rng, &i)) in rays.iter().zip(&hits).zip(rngs.iter_mut().zip(&owner)) {
-                let mut l = integrator.radiance(ray, hit, rng, &mut log);
+            for (mut l, &i) in wavefront.radiance().zip(&owner) {
                 if !l.is_finite() {
                     invalid += 1;
                     l = Vec3::ZERO;
                 }
                 pixels[i as usize].add(l);
             }
-            camera_time += t1 - t0;
-            shading_time += t1.elapsed();
             taken = pass_end;
+            phases.film += t1.elapsed();
         }
+        let t = Instant::now();
         for est in &mut pixels {
             est.done = est.n >= spp || settings.adaptive.is_some_and(|(_, tol)| est.converged(tol));
         }
+        phases.film += t.elapsed();
     }
-    TileResult { pixels, log, invalid_samples: invalid, camera_time, shading_time }
+    TileResult { pixels, log, invalid_samples: invalid, phases }
 }

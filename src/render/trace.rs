@@ -1,7 +1,7 @@
-//! The renderer's only door to ray queries. Camera rays of a tile are traced in one call
-//! ([`Tracer::closest_batch`]), shadow rays by occlusion queries and bounce rays by single-ray
-//! closest-hit queries, so that switching a kind of ray to another kernel (packets, streams)
-//! is a change in this file alone.
+//! The renderer's only door to ray queries. Every kind of ray is traced in streams: a batch
+//! of rays on the calling thread, as 16-ray packets through the hybrid packet kernels
+//! ([`Scene::intersect_batch`], [`Scene::occluded_batch`]), or (`brute_force`) ray by ray
+//! against every primitive.
 
 use crate::ray::{Hit, Ray};
 use crate::scene::Scene;
@@ -19,29 +19,36 @@ impl<'a> Tracer<'a> {
         Self { scene, brute_force }
     }
 
-    /// Closest hits of a batch of (coherent) camera rays: `hits[i]` for `rays[i]`, on the
-    /// calling thread, as 16-ray packets through the hybrid packet kernel ([`Scene::intersect_batch`]:
-    /// a frustum prefilter for coherent packets, single rays for subtrees few lanes want).
+    /// The scene traced.
+    pub fn scene(&self) -> &'a Scene {
+        self.scene
+    }
+
+    /// Closest hits of a batch of rays: `hits[i]` for `rays[i]` (same length), on the calling
+    /// thread. The packet kernel adapts to coherent rays (a frustum prefilter) and incoherent
+    /// ones (single rays for subtrees few lanes want); consecutive rays should travel alike
+    /// when they can (see [`super::order`]).
     pub fn closest_batch(&self, rays: &[Ray], hits: &mut [Hit]) {
         debug_assert_eq!(rays.len(), hits.len());
         if self.brute_force {
             for (r, h) in rays.iter().zip(hits.iter_mut()) {
-                *h = self.closest(r);
+                *h = self.scene.intersect1_brute_force(r);
             }
         } else {
             self.scene.intersect_batch(rays, hits);
         }
     }
 
-    /// Closest hit of one (incoherent) ray.
-    #[inline]
-    pub fn closest(&self, ray: &Ray) -> Hit {
-        if self.brute_force { self.scene.intersect1_brute_force(ray) } else { self.scene.intersect1(ray) }
-    }
-
-    /// True when anything blocks `ray` over `(tnear, tfar]`.
-    #[inline]
-    pub fn occluded(&self, ray: &Ray) -> bool {
-        if self.brute_force { self.scene.intersect1_brute_force(ray).is_hit() } else { self.scene.occluded1(ray) }
+    /// Occlusion of a batch of rays over `(tnear, tfar]`: `occluded[i]` for `rays[i]` (same
+    /// length), on the calling thread, with the packets' occluder cache carried along.
+    pub fn occluded_batch(&self, rays: &[Ray], occluded: &mut [bool]) {
+        debug_assert_eq!(rays.len(), occluded.len());
+        if self.brute_force {
+            for (r, o) in rays.iter().zip(occluded.iter_mut()) {
+                *o = self.scene.intersect1_brute_force(r).is_hit();
+            }
+        } else {
+            self.scene.occluded_batch(rays, occluded);
+        }
     }
 }

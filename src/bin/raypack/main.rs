@@ -174,10 +174,40 @@ struct RenderArgs {
     /// RAYPACK_ISA).
     #[arg(long, value_parser = parse_isa)]
     isa: Option<Isa>,
+    /// Order of the shadow-ray streams (default: the one measured fastest for the kernels).
+    #[arg(long, value_enum)]
+    shadow_order: Option<RayOrderArg>,
+    /// Order of the bounce-ray streams (default: the one measured fastest for the kernels).
+    #[arg(long, value_enum)]
+    bounce_order: Option<RayOrderArg>,
     /// Refuse scenes of more than N triangles and spheres (after triangulation and COLLADA
     /// instancing).
     #[arg(long, value_name = "N", long_help = MAX_PRIMITIVES_HELP)]
     max_primitives: Option<u64>,
+}
+
+/// `--shadow-order` / `--bounce-order`: [`raypack::render::RayOrder`].
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum RayOrderArg {
+    /// As shaded.
+    Queued,
+    /// By direction octant.
+    Octant,
+    /// By octant, then origin along a Morton curve.
+    OctantMorton,
+    /// By origin along a Morton curve.
+    Morton,
+}
+
+impl From<RayOrderArg> for raypack::render::RayOrder {
+    fn from(a: RayOrderArg) -> Self {
+        match a {
+            RayOrderArg::Queued => raypack::render::RayOrder::Queued,
+            RayOrderArg::Octant => raypack::render::RayOrder::Octant,
+            RayOrderArg::OctantMorton => raypack::render::RayOrder::OctantMorton,
+            RayOrderArg::Morton => raypack::render::RayOrder::Morton,
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]

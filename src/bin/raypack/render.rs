@@ -46,7 +46,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         .build()
         .map_err(|e| CliError::Usage(e.to_string()))?;
     pool.install(|| {
-        let settings = RenderSettings {
+        let mut settings = RenderSettings {
             width,
             height,
             samples_per_pixel: a.samples.max(1),
@@ -58,6 +58,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             seed: a.seed,
             brute_force: a.brute_force,
             russian_roulette: !a.no_russian_roulette,
+            stream_order: None,
         };
         let format = render::ImageFormat::of(&output);
         let exr = format == render::ImageFormat::Exr;
@@ -81,6 +82,13 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         let setup_time = [("load", load_time), ("BVH build", t.elapsed().as_secs_f64())];
         if let Some(isa) = a.isa {
             scene.set_isa(isa).map_err(|e| CliError::Usage(e.to_string()))?;
+        }
+        if a.shadow_order.is_some() || a.bounce_order.is_some() {
+            let default = render::StreamOrder::default_for(scene.isa());
+            settings.stream_order = Some(render::StreamOrder {
+                shadow: a.shadow_order.map_or(default.shadow, Into::into),
+                bounce: a.bounce_order.map_or(default.bounce, Into::into),
+            });
         }
         let aspect = width as f32 / height as f32;
         let camera = file_camera.unwrap_or_else(|| scene.camera_or_framing(aspect));
@@ -157,14 +165,24 @@ fn report(scene: &Scene, settings: &RenderSettings, out: &render::RenderOutput, 
         eprintln!("[raypack] warning: {} samples were NaN or infinite and counted as black.", s.invalid_samples);
     }
     eprintln!(
-        "[raypack] Time: {} {:.4}s, {} {:.4}s, render {:.4}s (thread time: camera rays {:.4}s, shading {:.4}s).",
-        setup[0].0,
-        setup[0].1,
-        setup[1].0,
-        setup[1].1,
-        secs,
-        s.camera_time.as_secs_f64(),
-        s.shading_time.as_secs_f64()
+        "[raypack] Time: {} {:.4}s, {} {:.4}s, render {:.4}s.",
+        setup[0].0, setup[0].1, setup[1].0, setup[1].1, secs
+    );
+    let p = &s.phases;
+    let total = p.total().as_secs_f64().max(1e-9);
+    let phase = |name: &str, d: std::time::Duration| {
+        format!("{name} {:.4}s ({:.1}%)", d.as_secs_f64(), 100.0 * d.as_secs_f64() / total)
+    };
+    eprintln!(
+        "[raypack] Thread time by phase: {}, {}, {}, {}, {}, {}, {}, {}.",
+        phase("generate", p.generate),
+        phase("trace camera", p.trace[0]),
+        phase("trace shadow", p.trace[1]),
+        phase("trace bounce", p.trace[2]),
+        phase("shade", p.shade),
+        phase("sort", p.sort),
+        phase("compact", p.compact),
+        phase("film", p.film)
     );
 }
 

@@ -1,0 +1,152 @@
+//! The wavefront's queues: batches of rays with the path (or sample) each belongs to, and the
+//! direct-lighting samples of the shading points of one bounce, waiting for their rays.
+//!
+//! Every buffer is allocated once per worker and reused from batch to batch and bounce to
+//! bounce (`clear` keeps the capacity), so that tracing a sample allocates nothing.
+
+use super::order::{RayOrder, SortScratch};
+use crate::math::{Aabb, Vec3};
+use crate::ray::{Hit, Ray};
+
+/// Rays to trace together, each with the index of what it belongs to (a path, or a direct
+/// sample), and their answers.
+#[derive(Clone, Debug, Default)]
+pub struct RayQueue {
+    /// The rays, in the order they are traced.
+    pub rays: Vec<Ray>,
+    /// `owner[i]`: the path or sample `rays[i]` belongs to.
+    pub owner: Vec<u32>,
+    /// Closest hits of `rays` (closest-hit queues).
+    pub hits: Vec<Hit>,
+    /// Occlusion of `rays` (shadow queues).
+    pub occluded: Vec<bool>,
+}
+
+impl RayQueue {
+    /// An empty queue.
+    pub fn clear(&mut self) {
+        self.rays.clear();
+        self.owner.clear();
+    }
+
+    /// Number of rays queued.
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.rays.len()
+    }
+
+    /// True when no ray is queued.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.rays.is_empty()
+    }
+
+    /// Queues `ray` for `owner`.
+    #[inline]
+    pub fn push(&mut self, ray: Ray, owner: u32) {
+        self.rays.push(ray);
+        self.owner.push(owner);
+    }
+
+    /// Keeps the rays whose `keep[i]` is set, in order (`keep` as long as the queue).
+    pub fn retain(&mut self, keep: &[bool]) {
+        debug_assert_eq!(keep.len(), self.len());
+        let mut n = 0;
+        for (i, &k) in keep.iter().enumerate() {
+            self.rays[n] = self.rays[i];
+            self.owner[n] = self.owner[i];
+            n += k as usize;
+        }
+        self.rays.truncate(n);
+        self.owner.truncate(n);
+    }
+
+    /// Reorders the rays (with their owners) for coherent tracing; a pure function of the
+    /// rays, so that the order never depends on the thread.
+    pub fn sort(&mut self, order: RayOrder, bounds: &Aabb, scratch: &mut SortScratch) {
+        scratch.sort(order, bounds, &mut self.rays, &mut self.owner);
+    }
+}
+
+/// One direct-lighting sample of a shading point: a light sample (answered by a shadow ray,
+/// or by nothing when no surface can lie between) or a uniform hemisphere ray (answered by
+/// its closest hit's emission). It adds `f · radiance · scale` when visible.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DirectSample {
+    /// The BSDF toward the sampled direction.
+    pub f: Vec3,
+    /// Radiance arriving from the sample if nothing is in the way (hemisphere samples: filled
+    /// in from their ray's closest hit).
+    pub radiance: Vec3,
+    /// `|cos θ| / pdf` of the sampled direction.
+    pub scale: f32,
+    /// The light sampled (its index), or [`super::integrator::HEMISPHERE`].
+    pub group: u32,
+    /// False once the sample's shadow ray is found blocked.
+    pub visible: bool,
+}
+
+/// A shading point whose direct lighting waits for its samples' rays.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DirectPoint {
+    /// The path shaded.
+    pub path: u32,
+    /// The path's throughput at the point (before its BSDF sample).
+    pub weight: Vec3,
+    /// Its first sample in [`DirectQueue::samples`]; the next point's `start` ends them.
+    pub start: u32,
+}
+
+/// The direct lighting of one bounce of a batch of paths: the shading points, their samples in
+/// the order they were drawn, and the rays that answer them.
+#[derive(Clone, Debug, Default)]
+pub struct DirectQueue {
+    /// Shading points, in the order they were shaded.
+    pub points: Vec<DirectPoint>,
+    /// Samples of all points, grouped by point.
+    pub samples: Vec<DirectSample>,
+    /// Shadow rays (any hit), each owned by its sample.
+    pub shadow: RayQueue,
+    /// Hemisphere rays (closest hit), each owned by its sample.
+    pub probes: RayQueue,
+}
+
+impl DirectQueue {
+    /// Empties the queue, keeping its buffers.
+    pub fn clear(&mut self) {
+        self.points.clear();
+        self.samples.clear();
+        self.shadow.clear();
+        self.probes.clear();
+    }
+
+    /// Starts the samples of a shading point of path `path` with throughput `weight`.
+    #[inline]
+    pub fn begin(&mut self, path: u32, weight: Vec3) {
+        self.points.push(DirectPoint { path, weight, start: self.samples.len() as u32 });
+    }
+
+    /// Adds a light sample of the current point, answered by `shadow` (none: always visible).
+    #[inline]
+    pub fn push_light(&mut self, sample: DirectSample, shadow: Option<Ray>) {
+        if let Some(r) = shadow {
+            self.shadow.push(r, self.samples.len() as u32);
+        }
+        self.samples.push(sample);
+    }
+
+    /// Adds a hemisphere sample of the current point, answered by `ray`'s closest hit.
+    #[inline]
+    pub fn push_probe(&mut self, sample: DirectSample, ray: Ray) {
+        self.probes.push(ray, self.samples.len() as u32);
+        self.samples.push(sample);
+    }
+
+    /// The samples of point `i`.
+    #[inline]
+    pub fn samples_of(&self, i: usize) -> &[DirectSample] {
+        let start = self.points[i].start as usize;
+        let end = self.points.get(i + 1).map_or(self.samples.len(), |p| p.start as usize);
+        &self.samples[start..end]
+    }
+}

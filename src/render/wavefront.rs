@@ -1,0 +1,407 @@
+//! Wavefront path tracing: a batch of paths advances together, one bounce at a time, and every
+//! ray of a bounce is traced in one stream through the packet kernels.
+//!
+//! A batch (the camera samples of one pass over a tile) goes through:
+//! 1. *generate*: the caller queues one camera ray per path ([`Wavefront::push_camera`]);
+//! 2. *trace*: the camera rays as one closest-hit stream;
+//! 3. *shade*: each hit adds its emission, queues its direct-lighting samples (shadow rays, or
+//!    hemisphere rays under `-H`), samples its BSDF and plays Russian roulette
+//!    ([`Integrator::shade`]), writing the continuation ray in place of the ray shaded;
+//! 4. *trace* the shadow rays of the whole batch as one occlusion stream (and the hemisphere
+//!    rays as one closest-hit stream), add each point's direct lighting
+//!    ([`Integrator::direct_total`]);
+//! 5. *compact* the surviving paths' rays, optionally *sort* them ([`RayOrder`]), trace them as
+//!    one closest-hit stream and go back to 3 until no path is left.
+//!
+//! A path's random numbers come from its own generator and are drawn in the same order
+//! whatever else is in the batch, and every ray gets the same answer from the stream kernels as
+//! alone, so the image does not depend on the batch, the order of the rays or the thread.
+
+use super::integrator::{Integrator, PathState, Scatter};
+use super::order::{RayOrder, SortScratch};
+use super::queue::{DirectQueue, RayQueue};
+use super::sampler::Rng;
+use super::stats::{RayKind, RayLog};
+use crate::math::Vec3;
+use crate::ray::{Hit, Ray};
+use crate::scene::SurfaceHit;
+use std::time::{Duration, Instant};
+
+/// How secondary rays are ordered before each stream.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct StreamOrder {
+    /// Shadow rays.
+    pub shadow: RayOrder,
+    /// Continuation rays (and hemisphere rays).
+    pub bounce: RayOrder,
+}
+
+impl StreamOrder {
+    /// The order measured fastest on `isa`'s kernels: shading order for both streams on
+    /// AVX-512 and AVX2 alike (no sort made the streams of a 1024-path wave trace faster on
+    /// CBbunny or the Stanford dragon, and sorting costs; see the README).
+    pub fn default_for(_isa: crate::Isa) -> Self {
+        Self::default()
+    }
+}
+
+/// One worker's wavefront: the paths of a batch and its queues, reused from batch to batch.
+#[derive(Clone, Debug, Default)]
+pub struct Wavefront {
+    /// Paths of the batch, in camera-ray order.
+    paths: Vec<PathState>,
+    /// The camera rays of the batch, owned by their paths.
+    camera: RayQueue,
+    /// The rays of the current bounce of the current wave, each owned by its path.
+    queue: RayQueue,
+    /// `alive[k]`: the path of `queue.rays[k]` goes on (its continuation replaced the ray).
+    alive: Vec<bool>,
+    /// `surfaces[k]`: the surface hit by `queue.rays[k]`, if any.
+    surfaces: Vec<SurfaceHit>,
+    /// `scatter[k]`: where the path of `queue.rays[k]` scatters, if it goes on.
+    scatter: Vec<Option<Scatter>>,
+    /// Direct lighting of the current bounce.
+    direct: DirectQueue,
+    scratch: SortScratch,
+}
+
+impl Wavefront {
+    /// An empty wavefront.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Makes room for batches of `paths` paths of `integrator`, so that tracing them
+    /// allocates nothing.
+    pub fn reserve(&mut self, paths: usize, integrator: &Integrator) {
+        fn room<T>(v: &mut Vec<T>, n: usize) {
+            v.reserve(n.saturating_sub(v.len()));
+        }
+        let Capacity { paths, wave, samples } = Capacity::of(paths, integrator.direct_samples_per_point() as usize);
+        room(&mut self.paths, paths);
+        let c = &mut self.camera;
+        room(&mut c.rays, paths);
+        room(&mut c.owner, paths);
+        room(&mut c.hits, paths);
+        room(&mut self.alive, wave);
+        room(&mut self.surfaces, wave);
+        room(&mut self.scatter, wave);
+        room(&mut self.direct.points, wave);
+        room(&mut self.direct.samples, samples);
+        let q = &mut self.queue;
+        room(&mut q.rays, wave);
+        room(&mut q.owner, wave);
+        room(&mut q.hits, wave);
+        // Shadow rays (light sampling) or hemisphere rays (`-H`): one kind per render.
+        let s = &mut self.direct.shadow;
+        room(&mut s.rays, samples);
+        room(&mut s.owner, samples);
+        room(&mut s.occluded, samples);
+        let p = &mut self.direct.probes;
+        if integrator.hemisphere_sampling() {
+            room(&mut p.rays, samples);
+            room(&mut p.owner, samples);
+            room(&mut p.hits, samples);
+        }
+        self.scratch.reserve(samples.max(wave));
+    }
+
+    /// Starts a new batch.
+    pub fn clear(&mut self) {
+        self.paths.clear();
+        self.camera.clear();
+    }
+
+    /// Number of paths in the batch.
+    pub fn len(&self) -> usize {
+        self.paths.len()
+    }
+
+    /// True when the batch has no path.
+    pub fn is_empty(&self) -> bool {
+        self.paths.is_empty()
+    }
+
+    /// Adds a path starting with camera ray `ray`, drawing from `rng`.
+    #[inline]
+    pub fn push_camera(&mut self, ray: Ray, rng: Rng) {
+        self.camera.push(ray, self.paths.len() as u32);
+        self.paths.push(PathState::new(rng));
+    }
+
+    /// The radiance each path of the batch brought back, in the order they were pushed.
+    pub fn radiance(&self) -> impl Iterator<Item = Vec3> + '_ {
+        self.paths.iter().map(|p| p.l)
+    }
+
+    /// Traces the batch to the end of its last path, logging the rays in `log` and the time
+    /// of each phase in `times`.
+    pub fn run(&mut self, integrator: &Integrator, order: StreamOrder, log: &mut RayLog, times: &mut PhaseTimes) {
+        let tracer = integrator.tracer();
+        let bounds = tracer.scene().bounds();
+        let mut clock = Clock::start();
+        let c = &mut self.camera;
+        resize(&mut c.hits, c.rays.len(), Hit::MISS);
+        tracer.closest_batch(&c.rays, &mut c.hits);
+        clock.lap(&mut times.trace[RayKind::Camera as usize]);
+        if !integrator.traces_paths() {
+            for (k, &id) in c.owner.iter().enumerate() {
+                self.paths[id as usize].l = integrator.camera_only(&c.rays[k], &c.hits[k]);
+            }
+            clock.lap(&mut times.shade);
+            return;
+        }
+        // The paths go on in waves of WAVE_PATHS, whose queues stay in the cache.
+        let n = c.rays.len();
+        for start in (0..n).step_by(WAVE_PATHS) {
+            let end = (start + WAVE_PATHS).min(n);
+            let (c, q) = (&self.camera, &mut self.queue);
+            q.clear();
+            q.rays.extend_from_slice(&c.rays[start..end]);
+            q.owner.extend_from_slice(&c.owner[start..end]);
+            q.hits.clear();
+            q.hits.extend_from_slice(&c.hits[start..end]);
+            clock.lap(&mut times.generate);
+            self.advance(integrator, order, &bounds, log, &mut clock, times);
+        }
+    }
+
+    /// Advances the paths of `queue` (rays traced, `hits` found) to their ends.
+    fn advance(
+        &mut self,
+        integrator: &Integrator,
+        order: StreamOrder,
+        bounds: &crate::math::Aabb,
+        log: &mut RayLog,
+        clock: &mut Clock,
+        times: &mut PhaseTimes,
+    ) {
+        let tracer = integrator.tracer();
+        loop {
+            // Shade: each surviving path's continuation replaces its ray.
+            let (q, d) = (&mut self.queue, &mut self.direct);
+            d.clear();
+            self.alive.clear();
+            let scene = tracer.scene();
+            resize(&mut self.surfaces, q.rays.len(), MISSED);
+            for ((s, ray), hit) in self.surfaces.iter_mut().zip(&q.rays).zip(&q.hits) {
+                if hit.is_hit() {
+                    *s = scene.surface(ray, hit);
+                }
+            }
+            self.scatter.clear();
+            for k in 0..q.rays.len() {
+                let id = q.owner[k];
+                let path = &mut self.paths[id as usize];
+                self.scatter.push(integrator.shade(path, &q.rays[k], &q.hits[k], &self.surfaces[k], d, id));
+                if d.samples.len() >= DIRECT_FLUSH {
+                    // Many light samples per point (`-l`): trace what is queued now, so that
+                    // the queue stays bounded.
+                    clock.lap(&mut times.shade);
+                    let ctx = DirectContext { integrator, order, bounds };
+                    ctx.trace(d, &mut self.paths, &mut self.scratch, log, clock, times);
+                    d.clear();
+                }
+            }
+            clock.lap(&mut times.shade);
+            for (k, at) in self.scatter.iter().enumerate() {
+                let next =
+                    at.and_then(|at| integrator.scatter(&mut self.paths[q.owner[k] as usize], &self.surfaces[k], &at));
+                if let Some(next) = next {
+                    q.rays[k] = next;
+                }
+                self.alive.push(next.is_some());
+            }
+            clock.lap(&mut times.shade);
+
+            let ctx = DirectContext { integrator, order, bounds };
+            ctx.trace(d, &mut self.paths, &mut self.scratch, log, clock, times);
+
+            // Compact the survivors, order and trace their continuations.
+            q.retain(&self.alive);
+            clock.lap(&mut times.compact);
+            if q.is_empty() {
+                return;
+            }
+            log_rays(log, RayKind::Bounce, &q.rays);
+            clock.lap(&mut times.compact);
+            q.sort(order.bounce, bounds, &mut self.scratch);
+            clock.lap(&mut times.sort);
+            resize(&mut q.hits, q.rays.len(), Hit::MISS);
+            tracer.closest_batch(&q.rays, &mut q.hits);
+            clock.lap(&mut times.trace[RayKind::Bounce as usize]);
+        }
+    }
+}
+
+/// What tracing a bounce's direct lighting needs besides its queue.
+struct DirectContext<'i, 'a> {
+    integrator: &'i Integrator<'a>,
+    order: StreamOrder,
+    bounds: &'i crate::math::Aabb,
+}
+
+impl DirectContext<'_, '_> {
+    /// Traces the shadow rays of `d` as one occlusion stream and its hemisphere rays as one
+    /// closest-hit stream, then adds each point's direct lighting to its path.
+    fn trace(
+        &self,
+        d: &mut DirectQueue,
+        paths: &mut [PathState],
+        scratch: &mut SortScratch,
+        log: &mut RayLog,
+        clock: &mut Clock,
+        times: &mut PhaseTimes,
+    ) {
+        let (integrator, order, bounds, tracer) = (self.integrator, self.order, self.bounds, self.integrator.tracer());
+        let s = &mut d.shadow;
+        if !s.is_empty() {
+            log_rays(log, RayKind::Shadow, &s.rays);
+            clock.lap(&mut times.shade);
+            s.sort(order.shadow, bounds, scratch);
+            clock.lap(&mut times.sort);
+            resize(&mut s.occluded, s.rays.len(), false);
+            tracer.occluded_batch(&s.rays, &mut s.occluded);
+            clock.lap(&mut times.trace[RayKind::Shadow as usize]);
+            for (&blocked, &i) in s.occluded.iter().zip(&s.owner) {
+                d.samples[i as usize].visible = !blocked;
+            }
+        }
+        let p = &mut d.probes;
+        if !p.is_empty() {
+            log_rays(log, RayKind::Bounce, &p.rays);
+            clock.lap(&mut times.shade);
+            p.sort(order.bounce, bounds, scratch);
+            clock.lap(&mut times.sort);
+            resize(&mut p.hits, p.rays.len(), Hit::MISS);
+            tracer.closest_batch(&p.rays, &mut p.hits);
+            clock.lap(&mut times.trace[RayKind::Bounce as usize]);
+            for ((ray, hit), &i) in p.rays.iter().zip(&p.hits).zip(&p.owner) {
+                d.samples[i as usize].radiance = integrator.probe_radiance(hit, ray.dir);
+            }
+        }
+        for (i, point) in d.points.iter().enumerate() {
+            let path = &mut paths[point.path as usize];
+            path.l += point.weight * integrator.direct_total(d.samples_of(i));
+        }
+        clock.lap(&mut times.shade);
+    }
+}
+
+/// Thread time of each phase of the wavefront (summed over threads).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PhaseTimes {
+    /// Generating camera rays (and their paths' random number generators).
+    pub generate: Duration,
+    /// Tracing, by kind of ray (`RayKind as usize`).
+    pub trace: [Duration; 3],
+    /// Shading hits (emission, light and BSDF sampling, Russian roulette) and adding the
+    /// direct lighting their shadow rays found.
+    pub shade: Duration,
+    /// Ordering secondary rays before they are traced.
+    pub sort: Duration,
+    /// Compacting the surviving paths.
+    pub compact: Duration,
+    /// Adding finished samples to their pixels (and adaptive sampling's test).
+    pub film: Duration,
+}
+
+impl PhaseTimes {
+    /// All phases.
+    pub fn total(&self) -> Duration {
+        self.generate + self.trace.iter().sum::<Duration>() + self.shade + self.sort + self.compact + self.film
+    }
+}
+
+impl std::ops::AddAssign for PhaseTimes {
+    fn add_assign(&mut self, o: Self) {
+        self.generate += o.generate;
+        for (a, b) in self.trace.iter_mut().zip(o.trace) {
+            *a += b;
+        }
+        self.shade += o.shade;
+        self.sort += o.sort;
+        self.compact += o.compact;
+        self.film += o.film;
+    }
+}
+
+/// How many elements a worker's buffers hold.
+struct Capacity {
+    /// Paths of a batch (camera queue, path states).
+    paths: usize,
+    /// Paths of a wave (bounce queue, surfaces, shading points).
+    wave: usize,
+    /// Direct-lighting samples of a wave's bounce before they are traced.
+    samples: usize,
+}
+
+impl Capacity {
+    /// For batches of `paths` paths and at most `direct` direct samples per shading point.
+    fn of(paths: usize, direct: usize) -> Self {
+        let wave = paths.min(WAVE_PATHS);
+        // The shading of a bounce stops to trace its direct lighting past DIRECT_FLUSH samples.
+        let samples = wave.saturating_mul(direct.max(1)).min(DIRECT_FLUSH + direct);
+        Self { paths, wave, samples }
+    }
+}
+
+/// Bytes one worker's [`Wavefront`] holds for batches of `paths` paths with at most `direct`
+/// direct-lighting samples per shading point (light sampling; hemisphere sampling's rays take
+/// as much again).
+pub fn worker_bytes(paths: usize, direct: usize) -> u64 {
+    use std::mem::size_of;
+    let Capacity { paths, wave, samples } = Capacity::of(paths, direct);
+    let ray = size_of::<Ray>() + size_of::<u32>();
+    let per_path = size_of::<PathState>() + ray + size_of::<Hit>();
+    let per_wave = ray
+        + size_of::<Hit>()
+        + size_of::<bool>()
+        + size_of::<SurfaceHit>()
+        + size_of::<Option<Scatter>>()
+        + size_of::<super::queue::DirectPoint>();
+    let per_sample = size_of::<super::queue::DirectSample>() + ray + size_of::<bool>();
+    let sort = SortScratch::bytes_per_ray() * samples.max(wave);
+    (paths * per_path + wave * per_wave + samples * per_sample + sort) as u64
+}
+
+/// Paths advanced together: a wave's queues (rays, hits, surfaces, shadow rays) stay in the
+/// L2 cache beside the BVH's upper levels.
+const WAVE_PATHS: usize = 1024;
+
+/// Direct-lighting samples queued before the bounce's shading is interrupted to trace them.
+const DIRECT_FLUSH: usize = 1 << 16;
+
+/// What stands in `surfaces` for a ray that hit nothing.
+const MISSED: SurfaceHit =
+    SurfaceHit { position: Vec3::ZERO, geometric_normal: Vec3::Z, shading_normal: Vec3::Z, material: 0 };
+
+/// Splits elapsed time into phases.
+struct Clock(Instant);
+
+impl Clock {
+    fn start() -> Self {
+        Self(Instant::now())
+    }
+
+    /// Adds the time since the last lap to `phase`.
+    #[inline]
+    fn lap(&mut self, phase: &mut Duration) {
+        let now = Instant::now();
+        *phase += now - self.0;
+        self.0 = now;
+    }
+}
+
+fn log_rays(log: &mut RayLog, kind: RayKind, rays: &[Ray]) {
+    for r in rays {
+        log.record(kind, r);
+    }
+}
+
+/// `v` with exactly `n` elements, all `fill`, keeping its capacity.
+#[inline]
+fn resize<T: Clone>(v: &mut Vec<T>, n: usize, fill: T) {
+    v.clear();
+    v.resize(n, fill);
+}
