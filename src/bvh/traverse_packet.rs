@@ -1,5 +1,8 @@
 //! Packet traversal of the 8-wide BVH: K = 8 or 16 rays at once, with active masks.
 //!
+//! (One file past 600 lines: the closest-hit and any-hit packet kernels share their node
+//! step, leaf culling and single-ray fallback, and read best side by side.)
+//!
 //! The scheme is Embree's hybrid one (Benthin, Wald, Woop, Ernst, Mark, "Combining Single
 //! and Packet-Ray Tracing for Arbitrary Ray Distributions on the Intel MIC Architecture",
 //! IEEE TVCG 2012) with the frustum prefilter of Embree's coherent mode (Reshetov, Soupikov,
