@@ -5,6 +5,7 @@
 
 mod bench;
 mod info;
+mod machine;
 mod render;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
@@ -41,8 +42,14 @@ enum AgainstArg {
 
 #[derive(Args)]
 struct BenchArgs {
-    /// Scene file (.dae, .obj, .ply).
-    scene: PathBuf,
+    /// Scene file (.dae, .obj, .ply); omit for the built-in Cornell box.
+    scene: Option<PathBuf>,
+    /// The scene file, as a flag (instead of SCENE).
+    #[arg(long = "scene", value_name = "FILE", conflicts_with = "scene")]
+    scene_flag: Option<PathBuf>,
+    /// Print every method's figures (the JSON always has them), not only the summary.
+    #[arg(short = 'v', long)]
+    verbose: bool,
     /// Also trace the same rays with another tracer.
     #[arg(long, value_enum)]
     against: Option<AgainstArg>,
@@ -55,7 +62,8 @@ struct BenchArgs {
     /// Timed runs per method (the median is reported), after one warm-up run.
     #[arg(long, default_value_t = 5)]
     runs: usize,
-    /// Thread counts to time at, comma-separated (0: all cores; default: 1 and all).
+    /// Thread counts to time at, comma-separated, e.g. `-t 1,2` (0: all cores; default: 1
+    /// and all).
     #[arg(short = 't', long = "threads", value_delimiter = ',')]
     threads: Vec<usize>,
     /// Time only the methods whose name contains one of these, comma-separated (e.g.
@@ -229,8 +237,11 @@ impl From<QualityArg> for BuildQuality {
 
 #[derive(Args)]
 struct InfoArgs {
-    /// Scene file (.dae, .obj, .ply).
-    scene: PathBuf,
+    /// Scene file (.dae, .obj, .ply); omit for the built-in Cornell box.
+    scene: Option<PathBuf>,
+    /// The scene file, as a flag (instead of SCENE).
+    #[arg(long = "scene", value_name = "FILE", conflicts_with = "scene")]
+    scene_flag: Option<PathBuf>,
     /// Check the BVH's structural invariants.
     #[arg(long)]
     validate: bool,
@@ -264,6 +275,23 @@ struct InfoArgs {
     /// instancing).
     #[arg(long, value_name = "N", long_help = MAX_PRIMITIVES_HELP)]
     max_primitives: Option<u64>,
+}
+
+/// How reports name the scene used when none is given.
+const BUILT_IN_SCENE: &str = "built-in Cornell box (scenes/cornell.dae)";
+
+impl BenchArgs {
+    /// SCENE or `--scene`; `None`: the built-in Cornell box.
+    fn scene_path(&self) -> Option<&Path> {
+        self.scene.as_deref().or(self.scene_flag.as_deref())
+    }
+}
+
+impl InfoArgs {
+    /// SCENE or `--scene`; `None`: the built-in Cornell box.
+    fn scene_path(&self) -> Option<&Path> {
+        self.scene.as_deref().or(self.scene_flag.as_deref())
+    }
 }
 
 /// Parses `--isa`, refusing a tier the CPU lacks.
