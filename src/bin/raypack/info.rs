@@ -147,7 +147,10 @@ pub fn scene_info(path: Option<&Path>, opts: &InfoOptions) -> Result<SceneInfo, 
     }
     let t = Instant::now();
     let (builder, warnings) = match path {
-        Some(path) => raypack::io::load_scene_with_options(path, &opts.load)?,
+        Some(path) => {
+            let loaded = raypack::io::load_scene_with_options(path, &opts.load)?;
+            (loaded.builder, loaded.warnings)
+        }
         None => (raypack::io::default_scene(), Vec::new()),
     };
     let load_seconds = t.elapsed().as_secs_f64();

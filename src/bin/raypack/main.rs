@@ -390,7 +390,10 @@ fn main() -> ExitCode {
 fn load(scene: Option<&Path>, max_primitives: Option<u64>) -> Result<(SceneBuilder, Vec<String>), CliError> {
     let opts = raypack::io::LoadOptions { max_primitives };
     Ok(match scene {
-        Some(p) => raypack::io::load_scene_with_options(p, &opts)?,
+        Some(p) => {
+            let loaded = raypack::io::load_scene_with_options(p, &opts)?;
+            (loaded.builder, loaded.warnings)
+        }
         None => (raypack::io::default_scene(), Vec::new()),
     })
 }
