@@ -14,8 +14,26 @@
 
 fn main() {
     println!("cargo:rerun-if-changed=build.rs");
+    git_commit();
     #[cfg(feature = "embree")]
     embree::build();
+}
+
+/// `RAYPACK_GIT_COMMIT`: `git rev-parse --short HEAD` when git and a checkout are there (the
+/// bench report names it); unset in a source archive or without git.
+fn git_commit() {
+    let git = |args: &[&str]| {
+        let out = std::process::Command::new("git").args(args).output().ok().filter(|o| o.status.success())?;
+        Some(String::from_utf8(out.stdout).ok()?.trim().to_string()).filter(|s| !s.is_empty())
+    };
+    let Some(commit) = git(&["rev-parse", "--short", "HEAD"]) else { return };
+    println!("cargo:rustc-env=RAYPACK_GIT_COMMIT={commit}");
+    // Rebuild when HEAD moves: HEAD itself, the branch it names, and the packed refs.
+    for path in ["HEAD", "packed-refs"].map(String::from).into_iter().chain(git(&["symbolic-ref", "-q", "HEAD"])) {
+        if let Some(p) = git(&["rev-parse", "--git-path", &path]).filter(|p| std::path::Path::new(p).exists()) {
+            println!("cargo:rerun-if-changed={p}");
+        }
+    }
 }
 
 #[cfg(feature = "embree")]

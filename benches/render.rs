@@ -11,7 +11,7 @@ use std::path::Path;
 
 fn cornell() -> Scene {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell.dae");
-    let builder = raypack::io::load_scene(&path).expect("scenes/cornell.dae loads");
+    let builder = raypack::io::load_scene(&path).expect("scenes/cornell.dae loads").builder;
     builder.commit(&BuildOptions::default()).0
 }
 

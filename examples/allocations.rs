@@ -72,7 +72,7 @@ fn main() {
     };
     let num = |i: usize, d: usize| args.get(i).map_or(d, |s| s.parse().expect("a number"));
     let (width, height, spp) = (num(2, 320), num(3, 240), num(4, 4) as u32);
-    let builder = raypack::io::load_scene(std::path::Path::new(path)).unwrap_or_else(|e| panic!("{e}"));
+    let builder = raypack::io::load_scene(std::path::Path::new(path)).unwrap_or_else(|e| panic!("{e}")).builder;
     println!("{path}, {} threads", rayon::current_num_threads());
     let (scene, _) = measure("build", || builder.commit(&BuildOptions::default()));
     let camera = scene.camera.unwrap_or_else(|| Camera::framing(&scene.bounds(), width as f32 / height as f32));

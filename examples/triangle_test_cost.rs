@@ -60,7 +60,7 @@ fn main() -> ExitCode {
     };
     let watertight = args.get(4).is_some_and(|a| a == "--watertight");
     let builder = match raypack::io::load_scene(&path) {
-        Ok(b) => b,
+        Ok(loaded) => loaded.builder,
         Err(e) => {
             eprintln!("{e}");
             return ExitCode::from(2);

@@ -613,7 +613,7 @@ fn third_party_scenes_agree_with_embree() {
     let mut total = 0;
     for (file, res) in files {
         let path = root.join(&file);
-        let builder = raypack::io::load_scene(Path::new(&path)).unwrap_or_else(|e| panic!("{file}: {e}"));
+        let builder = raypack::io::load_scene(Path::new(&path)).unwrap_or_else(|e| panic!("{file}: {e}")).builder;
         let (scene, _) = builder.commit(&BuildOptions { keep_bvh2: true, ..BuildOptions::default() });
         let scene = triangles_only(&scene);
         let sets = ray_sets(&scene, res, 60_000, 30_000);
@@ -648,7 +648,7 @@ fn watertight_agrees_with_robust_embree() {
     ];
     if let Some(root) = common::scenes_dir("watertight_agrees_with_robust_embree (dragon)") {
         let path = root.join("models/stanford-dragon-871k.ply");
-        let builder = raypack::io::load_scene(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let builder = raypack::io::load_scene(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).builder;
         scenes.push(("watertight dragon".to_string(), builder.commit(&opts).0, (320, 240)));
     }
     let mut failures = Vec::new();

@@ -272,7 +272,8 @@ fn obj_material_library_that_is_a_device_or_fifo_is_not_read() {
     for lib in libraries {
         let obj = dir.path().join("dev.obj");
         std::fs::write(&obj, format!("mtllib {lib}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")).unwrap();
-        let (b, warnings) = raypack::io::load_scene_with_warnings(&obj).unwrap_or_else(|e| panic!("{e}"));
+        let raypack::io::LoadedScene { builder: b, warnings, .. } =
+            raypack::io::load_scene(&obj).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(b.num_triangles(), 1);
         assert!(warnings.iter().any(|w| w.contains(&lib) && w.contains("not a regular file")), "{warnings:?}");
     }

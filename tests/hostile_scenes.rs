@@ -4,7 +4,7 @@
 //! the element or line, or a warning that says what was substituted; the expansion of
 //! instancing is reported and capped by `--max-primitives`.
 
-use raypack::io::load_scene_with_warnings;
+use raypack::io::load_scene;
 
 mod common;
 use common::{expect_error, load_named};
@@ -125,7 +125,7 @@ fn obj_polylines_missing_materials_and_bad_colours_are_said_out_loud() {
     )
     .unwrap();
     std::fs::write(dir.path().join("m.mtl"), "newmtl hot\nKd 2 0.5 0.5\nKe 1 -1 1\n").unwrap();
-    let (b, warnings) = load_scene_with_warnings(&obj).unwrap();
+    let raypack::io::LoadedScene { builder: b, warnings, .. } = load_scene(&obj).unwrap();
     // Polylines are not faces: three triangles, not five.
     assert_eq!(b.num_triangles(), 3, "{warnings:?}");
     let has = |s: &str| warnings.iter().any(|w| w.contains(s));
@@ -138,7 +138,7 @@ fn obj_polylines_missing_materials_and_bad_colours_are_said_out_loud() {
 
     // NaN colours: the library is not used, and the warning names its line.
     std::fs::write(dir.path().join("m.mtl"), "newmtl hot\nKd 0.5 0.5 0.5\nKe nan 1 1\n").unwrap();
-    let (b, warnings) = load_scene_with_warnings(&obj).unwrap();
+    let raypack::io::LoadedScene { builder: b, warnings, .. } = load_scene(&obj).unwrap();
     assert!(
         warnings.iter().any(|w| w.contains("material library m.mtl: line 3: Ke value nan is not a finite number")
             && w.contains("using the default material")),
@@ -147,7 +147,7 @@ fn obj_polylines_missing_materials_and_bad_colours_are_said_out_loud() {
     let (scene, _) = b.commit(&raypack::BuildOptions::default());
     assert!(scene.materials.iter().all(|m| m.emission.is_finite() && !m.is_emissive()));
     std::fs::write(dir.path().join("m.mtl"), "newmtl hot\nKd inf 0.5 0.5\n").unwrap();
-    let (_, warnings) = load_scene_with_warnings(&obj).unwrap();
+    let warnings = load_scene(&obj).unwrap().warnings;
     assert!(warnings.iter().any(|w| w.contains("line 2: Kd value inf is not a finite number")), "{warnings:?}");
 }
 

@@ -4,7 +4,7 @@
 
 mod common;
 
-use raypack::io::{LoadError, SceneFormat, load_scene, load_scene_from_bytes, load_scene_with_warnings};
+use raypack::io::{LoadError, LoadedScene, SceneFormat, Synthesized, load_scene, load_scene_from_bytes};
 use raypack::{BuildOptions, Light, Scene, SceneBuilder, Vec3};
 use std::path::{Path, PathBuf};
 
@@ -13,7 +13,7 @@ fn commit(b: SceneBuilder) -> Scene {
 }
 
 fn dae(text: &str) -> Result<SceneBuilder, LoadError> {
-    load_scene_from_bytes(text.as_bytes(), SceneFormat::Dae, Path::new("test.dae")).map(|(b, _)| b)
+    load_scene_from_bytes(text.as_bytes(), SceneFormat::Dae, Path::new("test.dae")).map(|l| l.builder)
 }
 
 fn close(a: Vec3, b: Vec3, tol: f32) -> bool {
@@ -51,7 +51,7 @@ fn every_cs184_scene_loads_with_the_documented_triangle_counts() {
     ];
     let mut checked = 0;
     for f in &files {
-        let b = load_scene(f).unwrap_or_else(|e| panic!("{} failed to load: {e}", f.display()));
+        let b = load_scene(f).unwrap_or_else(|e| panic!("{} failed to load: {e}", f.display())).builder;
         assert!(b.num_triangles() + b.num_spheres() > 0, "{}: no geometry", f.display());
         assert!(!b.lights().is_empty(), "{}: no lights (the default rig should have been added)", f.display());
         assert!(b.camera().is_some(), "{}: every CS184 scene has a camera", f.display());
@@ -70,7 +70,7 @@ fn every_cs184_scene_loads_with_the_documented_triangle_counts() {
 #[test]
 fn cbspheres_has_two_spheres_with_cs184_materials() {
     let Some(root) = common::scenes_dir("cbspheres_materials") else { return };
-    let b = load_scene(&root.join("cs184/sky/CBspheres.dae")).unwrap();
+    let b = load_scene(&root.join("cs184/sky/CBspheres.dae")).unwrap().builder;
     assert_eq!((b.num_triangles(), b.num_spheres()), (12, 2));
     let s = commit(b);
     let kinds: Vec<_> = s.spheres.material.iter().map(|&m| s.materials[m as usize].bsdf).collect();
@@ -90,7 +90,7 @@ fn cbspheres_has_two_spheres_with_cs184_materials() {
 #[test]
 fn cbspheres_camera_and_area_light_land_where_cs184_puts_them() {
     let Some(root) = common::scenes_dir("cbspheres_camera_light") else { return };
-    let b = load_scene(&root.join("cs184/sky/CBspheres.dae")).unwrap();
+    let b = load_scene(&root.join("cs184/sky/CBspheres.dae")).unwrap().builder;
 
     // Area light node: <matrix> = diag(0.6, 0.8, 1) with translation (0, 0, 1.49), Z_UP.
     // CS184's AreaLight: position = T·0, direction = L·(0,0,-1), dim_y = L·(0,1,0),
@@ -137,7 +137,7 @@ fn stanford_models_load_with_the_documented_counts() {
         ("lucy-100k.obj", 99_970),
     ];
     for (name, n) in models {
-        let (b, warnings) = load_scene_with_warnings(&root.join("models").join(name)).unwrap();
+        let LoadedScene { builder: b, warnings, .. } = load_scene(&root.join("models").join(name)).unwrap();
         assert_eq!(b.num_triangles(), n, "{name}");
         assert!(b.camera().is_none(), "{name}: no camera in the file; the renderer frames it");
         assert_eq!(b.lights().len(), 1, "{name}: the default light rig");
@@ -225,7 +225,7 @@ fn ply_ascii_little_and_big_endian_give_identical_geometry() {
     for format in ["ascii", "binary_little_endian", "binary_big_endian"] {
         let path = dir.path().join(format!("{format}.ply"));
         std::fs::write(&path, write_ply(&pos, &faces, format)).unwrap();
-        scenes.push(commit(load_scene(&path).unwrap_or_else(|e| panic!("{format}: {e}"))));
+        scenes.push(commit(load_scene(&path).unwrap_or_else(|e| panic!("{format}: {e}")).builder));
     }
     // Expected: the positions as written, polygons fanned from their first corner.
     let mut expect = Vec::new();
@@ -346,14 +346,56 @@ fn obj_with_mtl_reads_diffuse_and_emission_and_missing_mtl_is_a_warning() {
     std::fs::write(dir.path().join("box.obj"), obj).unwrap();
     std::fs::write(dir.path().join("box.mtl"), "newmtl red\nKd 0.8 0.1 0.1\nnewmtl lamp\nKd 0 0 0\nKe 5 4 3\n")
         .unwrap();
-    let s = commit(load_scene(&dir.path().join("box.obj")).unwrap());
+    let s = commit(load_scene(&dir.path().join("box.obj")).unwrap().builder);
     assert_eq!(s.num_triangles(), 3);
     let mats: Vec<_> = s.triangles.material.iter().map(|&m| &s.materials[m as usize]).collect();
     assert_eq!(mats[0].bsdf, raypack::Bsdf::Diffuse { albedo: Vec3::new(0.8, 0.1, 0.1) });
     assert_eq!(mats[2].emission, Vec3::new(5.0, 4.0, 3.0));
 
     std::fs::remove_file(dir.path().join("box.mtl")).unwrap();
-    let (b, warnings) = load_scene_with_warnings(&dir.path().join("box.obj")).unwrap();
+    let LoadedScene { builder: b, warnings, .. } = load_scene(&dir.path().join("box.obj")).unwrap();
     assert_eq!(b.num_triangles(), 3);
     assert!(warnings.iter().any(|w| w.contains("box.mtl") && w.contains("not found")), "{warnings:?}");
+}
+
+/// The child half of `load_scene_prints_nothing_and_returns_its_warnings`: when
+/// `RAYPACK_LOAD_CHILD` names a file, loads it and checks the returned warnings (its stderr
+/// is what the parent inspects); otherwise does nothing.
+#[test]
+fn load_scene_child() {
+    let Some(path) = std::env::var_os("RAYPACK_LOAD_CHILD") else { return };
+    let loaded = load_scene(Path::new(&path)).unwrap();
+    assert!(loaded.warnings.iter().any(|w| w.contains("no lights in the file")), "{:?}", loaded.warnings);
+    assert!(
+        loaded.warnings.iter().any(|w| w.contains("faces with fewer than 3 corners skipped")),
+        "{:?}",
+        loaded.warnings
+    );
+    assert_eq!(loaded.synthesized, [Synthesized::DefaultLights { count: 1 }]);
+    assert_eq!(loaded.builder.lights().len(), 1);
+    println!("child loaded {} warnings", loaded.warnings.len());
+}
+
+#[test]
+fn load_scene_prints_nothing_and_returns_its_warnings() {
+    // A PLY with a two-corner face (skipped, with a warning) and no lights (the default rig
+    // is added, with a warning and a `Synthesized` entry).
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("warned.ply");
+    std::fs::write(
+        &ply,
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n\
+         element face 2\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n2 0 1\n",
+    )
+    .unwrap();
+    // This test binary runs itself: the child loads the file, and its stderr must stay empty.
+    let out = std::process::Command::new(std::env::current_exe().unwrap())
+        .args(["--exact", "load_scene_child", "--nocapture", "--test-threads", "1"])
+        .env("RAYPACK_LOAD_CHILD", &ply)
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "child failed:\n{stdout}\n{stderr}");
+    assert!(stdout.contains("child loaded 2 warnings"), "the child ran the load: {stdout}");
+    assert_eq!(stderr, "", "the library printed");
 }

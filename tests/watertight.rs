@@ -167,7 +167,7 @@ fn no_ray_passes_through_a_sphere_of_needles() {
 fn no_ray_passes_through_the_stanford_dragon() {
     let Some(dir) = scenes_dir("watertight dragon") else { return };
     let path = dir.join("models/stanford-dragon-871k.ply");
-    let builder = raypack::io::load_scene(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let builder = raypack::io::load_scene(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).builder;
     let (loaded, _) = builder.commit(&BuildOptions { keep_bvh2: true, ..BuildOptions::default() });
     let mesh = Mesh { positions: loaded.triangles.positions.clone(), indices: loaded.triangles.indices.clone() };
     drop(loaded);

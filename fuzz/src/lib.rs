@@ -16,11 +16,11 @@ use std::path::Path;
 /// ray through its centre stays in range. Returns the builder's triangle count when it loaded.
 pub fn load_and_check(data: &[u8], format: SceneFormat, name: &str) -> Option<usize> {
     match load_scene_from_bytes(data, format, Path::new(name)) {
-        Ok((builder, warnings)) => {
-            for w in &warnings {
+        Ok(loaded) => {
+            for w in &loaded.warnings {
                 assert!(w.starts_with(name), "warning does not name the file: {w}");
             }
-            Some(commit_and_trace(builder))
+            Some(commit_and_trace(loaded.builder))
         }
         Err(e) => {
             check_error(&e, name);

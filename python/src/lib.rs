@@ -491,7 +491,7 @@ fn load(
 fn load_path(py: Python<'_>, path: &Path, build: &BuildArgs) -> PyResult<PyScene> {
     let (builder, warnings) = {
         let p = path.to_path_buf();
-        run_detached(py, &PoolCache::default(), build.threads, move || raypack::io::load_scene_with_warnings(&p))?
+        run_detached(py, &PoolCache::default(), build.threads, move || raypack::io::load_scene(&p).map(|l| (l.builder, l.warnings)))?
             .map_err(load_error)?
     };
     for w in warnings {

@@ -1,8 +1,11 @@
 //! Scene loaders: COLLADA (`.dae`, CS184 dialect), OBJ and PLY. Each returns a
-//! [`crate::SceneBuilder`] or a [`LoadError`] naming the file and the element or line.
+//! [`LoadedScene`] (the [`crate::SceneBuilder`], the warnings, and what the loader added that
+//! the file did not hold) or a [`LoadError`] naming the file and the element or line. The
+//! loaders never print: the caller reports the warnings its own way (the CLI prints them).
 //!
 //! Files without a camera get none: the renderer frames the bounding box
-//! ([`crate::Scene::camera_or_framing`]). Files without lights get [`default_light_rig`]: one
+//! ([`crate::Scene::camera_or_framing`]). Files without lights get [`default_light_rig`]
+//! (reported as [`Synthesized::DefaultLights`] and in a warning): one
 //! point light above and in front of the scene, on the camera's side. A point light is a
 //! delta light that a hemisphere sampler can never hit, so with `-H` (uniform hemisphere
 //! sampling for direct light) such scenes render black, exactly as CS184's do for its
@@ -49,20 +52,35 @@ impl SceneFormat {
     }
 }
 
-/// Loads a scene file, choosing the format by extension (`.dae`, `.obj`, `.ply`), and prints
-/// the loader's warnings to stderr. Adds [`default_light_rig`] when the file has no lights.
-/// (A convenience for examples and benchmarks; programs that report warnings their own way
-/// call [`load_scene_with_options`].)
-pub fn load_scene(path: &Path) -> Result<SceneBuilder, LoadError> {
-    let (builder, warnings) = load_scene_with_warnings(path)?;
-    for w in warnings {
-        eprintln!("[raypack] warning: {w}");
-    }
-    Ok(builder)
+/// A loaded scene file: the scene to commit, and what the caller should tell its user.
+#[derive(Clone, Debug)]
+pub struct LoadedScene {
+    /// The scene, ready to [`SceneBuilder::commit`].
+    pub builder: SceneBuilder,
+    /// Problems the loader worked around, each naming the file (and the line or element),
+    /// and each substitution it made; nothing is printed.
+    pub warnings: Vec<String>,
+    /// What the loader added that the file did not hold (also among the warnings).
+    pub synthesized: Vec<Synthesized>,
 }
 
-/// [`load_scene`] without printing: returns the warnings (each naming the file).
-pub fn load_scene_with_warnings(path: &Path) -> Result<(SceneBuilder, Vec<String>), LoadError> {
+/// Something a loader added to a scene that its file did not hold.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum Synthesized {
+    /// The file has no lights: the `count` lights of [`default_light_rig`] were added (the
+    /// last `count` of [`SceneBuilder::lights`]). A camera is never synthesised: a file
+    /// without one leaves [`SceneBuilder::camera`] `None`, and the renderer frames the scene.
+    DefaultLights {
+        /// Lights added.
+        count: usize,
+    },
+}
+
+/// Loads a scene file, choosing the format by extension (`.dae`, `.obj`, `.ply`). Adds
+/// [`default_light_rig`] when the file has no lights. Prints nothing: the warnings are
+/// returned.
+pub fn load_scene(path: &Path) -> Result<LoadedScene, LoadError> {
     load_scene_with_options(path, &LoadOptions::default())
 }
 
@@ -75,9 +93,9 @@ pub struct LoadOptions {
     pub max_primitives: Option<u64>,
 }
 
-/// [`load_scene_with_warnings`] with limits. The file is read only if it is a regular file
-/// of at most [`input::MAX_SCENE_BYTES`] (a FIFO or `/dev/zero` is an error, not a hang).
-pub fn load_scene_with_options(path: &Path, opts: &LoadOptions) -> Result<(SceneBuilder, Vec<String>), LoadError> {
+/// [`load_scene`] with limits. The file is read only if it is a regular file of at most
+/// [`input::MAX_SCENE_BYTES`] (a FIFO or `/dev/zero` is an error, not a hang).
+pub fn load_scene_with_options(path: &Path, opts: &LoadOptions) -> Result<LoadedScene, LoadError> {
     let format =
         SceneFormat::from_path(path).ok_or_else(|| LoadError::UnsupportedFormat { path: path.to_path_buf() })?;
     let bytes = input::read_regular(path, input::MAX_SCENE_BYTES, "scene files")
@@ -99,11 +117,7 @@ fn read_material_library(path: &Path) -> Result<Vec<u8>, String> {
 
 /// Loads a scene held in memory (for tests and fuzzing). `name` only names it in errors;
 /// OBJ material libraries are not looked up.
-pub fn load_scene_from_bytes(
-    bytes: &[u8],
-    format: SceneFormat,
-    name: &Path,
-) -> Result<(SceneBuilder, Vec<String>), LoadError> {
+pub fn load_scene_from_bytes(bytes: &[u8], format: SceneFormat, name: &Path) -> Result<LoadedScene, LoadError> {
     load_scene_from_bytes_with_options(bytes, format, name, &LoadOptions::default())
 }
 
@@ -113,7 +127,7 @@ pub fn load_scene_from_bytes_with_options(
     format: SceneFormat,
     name: &Path,
     opts: &LoadOptions,
-) -> Result<(SceneBuilder, Vec<String>), LoadError> {
+) -> Result<LoadedScene, LoadError> {
     load_with(bytes, format, name, &|_| Err("not looked up for a scene held in memory".into()), opts)
 }
 
@@ -123,7 +137,7 @@ fn load_with(
     path: &Path,
     read_mtl: &dyn Fn(&Path) -> Result<Vec<u8>, String>,
     opts: &LoadOptions,
-) -> Result<(SceneBuilder, Vec<String>), LoadError> {
+) -> Result<LoadedScene, LoadError> {
     let (mut builder, warnings) = match format {
         SceneFormat::Dae => {
             let text = std::str::from_utf8(bytes)
@@ -154,14 +168,17 @@ fn load_with(
         }
     };
     let mut warnings: Vec<String> = warnings.into_iter().map(|w| format!("{}: {w}", path.display())).collect();
+    let mut synthesized = Vec::new();
     if builder.lights().is_empty() {
-        for light in default_light_rig(&builder.bounds(), builder.camera()) {
+        let rig = default_light_rig(&builder.bounds(), builder.camera());
+        synthesized.push(Synthesized::DefaultLights { count: rig.len() });
+        for light in rig {
             builder.add_light(light);
         }
         warnings
             .push(format!("{}: no lights in the file; added the default light rig (one point light)", path.display()));
     }
-    Ok((builder, warnings))
+    Ok(LoadedScene { builder, warnings, synthesized })
 }
 
 /// The lights given to scenes that have none: one point light above and in front of the

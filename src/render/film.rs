@@ -117,9 +117,24 @@ pub enum ImageFormat {
 }
 
 impl ImageFormat {
+    /// The file extensions raypack writes images in, with what each holds.
+    pub const EXTENSIONS: [(&'static str, &'static str); 2] =
+        [("png", "8-bit sRGB"), ("exr", "linear 32-bit float radiance")];
+
     /// EXR when `path` ends in `.exr` (any case), PNG otherwise.
     pub fn of(path: &Path) -> Self {
         if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) { Self::Exr } else { Self::Png }
+    }
+
+    /// The format `path`'s extension names (PNG for a path without one), or `None` for an
+    /// extension raypack cannot write (`.jpg`): [`ImageFormat::of`] would write PNG bytes there.
+    pub fn for_path(path: &Path) -> Option<Self> {
+        match path.extension() {
+            None => Some(Self::Png),
+            Some(e) if e.eq_ignore_ascii_case("png") => Some(Self::Png),
+            Some(e) if e.eq_ignore_ascii_case("exr") => Some(Self::Exr),
+            Some(_) => None,
+        }
     }
 }
 

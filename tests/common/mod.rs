@@ -57,6 +57,7 @@ pub fn load_named(bytes: &[u8], name: &str) -> Result<(SceneBuilder, Vec<String>
     use raypack::io::{SceneFormat, load_scene_from_bytes};
     let path = std::path::Path::new(name);
     load_scene_from_bytes(bytes, SceneFormat::from_path(path).expect("known extension"), path)
+        .map(|l| (l.builder, l.warnings))
 }
 
 /// Loads `bytes` as `name`, expects an error naming the file first and `location`, and

@@ -7,6 +7,7 @@
 //! median time is reported. `--isa` lowers the scene's ISA tier and limits Embree to the same
 //! tier.
 
+use crate::machine::{self, CpuTimes, Machine};
 use crate::{BenchArgs, CliError, check_memory, load, print_warnings};
 #[cfg(feature = "embree")]
 use raypack::methods::embree_methods;
@@ -107,6 +108,10 @@ pub struct BenchRow {
     pub threads: usize,
     /// Million rays per second (median run).
     pub mrays_per_s: f64,
+    /// Million rays per second of the slowest timed run.
+    pub mrays_per_s_min: f64,
+    /// Million rays per second of the fastest timed run.
+    pub mrays_per_s_max: f64,
     /// Checksum of the results.
     pub checksum: Checksum,
     /// True when the checksum differs from the reference's by more than `1e-5` of the rays.
@@ -130,6 +135,91 @@ pub struct BenchReport {
     pub build: Vec<BuildFigures>,
     /// Results.
     pub rows: Vec<BenchRow>,
+    /// When the run started, RFC 3339 in UTC.
+    pub date: String,
+    /// The CPU, its ISA flags and the memory.
+    pub machine: Machine,
+    /// raypack's ISA tier in this run.
+    pub raypack_isa: Isa,
+    /// Embree's version and the ISA it chose (with `--against embree`).
+    pub embree: Option<EmbreeIdentity>,
+    /// How busy the machine was.
+    pub load: Load,
+}
+
+/// Which Embree ran and on what ISA.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EmbreeIdentity {
+    /// Its version, e.g. `3.13.5`.
+    pub version: String,
+    /// The ISA tier it ran on (`sse`, `avx`, `avx2`, `avx512`). Embree has no query for its
+    /// chosen ISA, so this is inferred from its native packet widths (16-wide: AVX-512,
+    /// 8-wide: AVX or AVX2, neither: SSE), capped by `max_isa`.
+    pub isa: String,
+}
+
+/// The machine's load around the run: other work on the CPUs makes the figures noisy, and
+/// the ratios of methods timed at different moments unreliable.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Load {
+    /// 1-, 5- and 15-minute load averages before the run.
+    pub before: Option<[f64; 3]>,
+    /// The same after the run (which includes the run itself).
+    pub after: Option<[f64; 3]>,
+    /// The share of all CPUs other processes kept busy in the moment before the run.
+    pub busy_before: Option<f64>,
+    /// The share of the CPU time during the run that the hypervisor stole.
+    pub steal: Option<f64>,
+}
+
+impl Load {
+    /// Why the figures may be unreliable, if they may: other processes busy before the run,
+    /// a 1-minute load average above half the logical CPUs, or more than 2% steal time.
+    pub fn busy_reason(&self, logical_cpus: usize) -> Option<String> {
+        let mut why = Vec::new();
+        if let Some(b) = self.busy_before.filter(|&b| b > 0.25) {
+            why.push(format!("other processes kept {:.0}% of the CPUs busy just before the run", 100.0 * b));
+        }
+        if let Some([l1, ..]) = self.before.filter(|l| l[0] > 0.5 * logical_cpus as f64) {
+            why.push(format!("the 1-minute load average was {l1:.2} on {logical_cpus} logical CPUs"));
+        }
+        if let Some(st) = self.steal.filter(|&st| st > 0.02) {
+            why.push(format!("the hypervisor stole {:.1}% of the CPU time during the run", 100.0 * st));
+        }
+        (!why.is_empty()).then(|| why.join("; "))
+    }
+}
+
+/// One line of the summary: the best raypack method against the best Embree call on one ray
+/// set at one thread count.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SummaryRow {
+    /// Ray set name.
+    pub rays: &'static str,
+    /// Threads used.
+    pub threads: usize,
+    /// raypack's fastest method (by median), among those whose checksum matches.
+    pub raypack: BenchRow,
+    /// Embree's fastest call, when Embree ran.
+    pub embree: Option<BenchRow>,
+}
+
+impl SummaryRow {
+    /// raypack's median over Embree's median.
+    pub fn ratio(&self) -> Option<f64> {
+        self.embree.as_ref().map(|e| self.raypack.mrays_per_s / e.mrays_per_s.max(1e-12))
+    }
+
+    /// The spread of the ratio over the runs: raypack's slowest over Embree's fastest, and
+    /// raypack's fastest over Embree's slowest.
+    pub fn ratio_range(&self) -> Option<(f64, f64)> {
+        self.embree.as_ref().map(|e| {
+            (
+                self.raypack.mrays_per_s_min / e.mrays_per_s_max.max(1e-12),
+                self.raypack.mrays_per_s_max / e.mrays_per_s_min.max(1e-12),
+            )
+        })
+    }
 }
 
 fn median(mut xs: Vec<Duration>) -> Duration {
@@ -168,6 +258,10 @@ pub fn run_bench(
         scene.set_isa(isa).map_err(|e| BenchError::Settings(e.to_string()))?;
     }
     let scene = &*scene;
+    let date = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
+    let load_before = machine::load_average();
+    let busy_before = machine::busy_fraction(Duration::from_millis(300));
+    let cpu_before = CpuTimes::now();
     let mut report = BenchReport {
         scene: name.to_string(),
         triangles: scene.num_triangles(),
@@ -176,6 +270,11 @@ pub fn run_bench(
         notes: vec![format!("raypack ISA: {} (CPU's best: {})", scene.isa(), Isa::detected())],
         build: vec![raypack_build],
         rows: Vec::new(),
+        date,
+        machine: machine::machine(),
+        raypack_isa: scene.isa(),
+        embree: None,
+        load: Load { before: load_before, busy_before, ..Load::default() },
     };
 
     #[cfg(feature = "embree")]
@@ -195,6 +294,16 @@ pub fn run_bench(
             v.push(e);
         }
         let e = &v[0];
+        let isa = if e.native_packets(EmbreeWidth::W16) {
+            "avx512"
+        } else if !e.native_packets(EmbreeWidth::W8) {
+            "sse"
+        } else if settings.isa.is_none_or(|i| i >= Isa::Avx2) && Isa::detected() >= Isa::Avx2 {
+            "avx2"
+        } else {
+            "avx"
+        };
+        report.embree = Some(EmbreeIdentity { version: e.version(), isa: isa.to_string() });
         report.notes.push(format!(
             "Embree {} (max_isa {}): native 8-wide packets {}, 16-wide {}",
             e.version(),
@@ -266,14 +375,20 @@ pub fn run_bench(
             for ((m, checksum), (reps, times)) in chosen.iter().zip(checksums).zip(reps.into_iter().zip(times)) {
                 let allowed = (set.rays.len() as f64 * 1e-5).max(0.0);
                 let checksum_differs = (checksum.hits as f64 - ref_sum.hits as f64).abs() > allowed;
-                let med = median(times).as_secs_f64().max(1e-12);
+                let secs = |d: Duration| d.as_secs_f64().max(1e-12);
+                let mrays = |d: Duration| (reps * set.rays.len()) as f64 / secs(d) / 1e6;
+                let (fastest, slowest) =
+                    (*times.iter().min().expect("runs > 0"), *times.iter().max().expect("runs > 0"));
+                let med = median(times);
                 let row = BenchRow {
                     rays: set.kind.name(),
                     ray_count: set.rays.len(),
                     tracer: m.tracer,
                     method: m.name.clone(),
                     threads,
-                    mrays_per_s: (reps * set.rays.len()) as f64 / med / 1e6,
+                    mrays_per_s: mrays(med),
+                    mrays_per_s_min: mrays(slowest),
+                    mrays_per_s_max: mrays(fastest),
                     checksum,
                     checksum_differs,
                 };
@@ -285,6 +400,8 @@ pub fn run_bench(
             }
         }
     }
+    report.load.after = machine::load_average();
+    report.load.steal = cpu_before.zip(CpuTimes::now()).map(|(a, b)| b.since(&a).1);
     Ok(report)
 }
 
@@ -298,7 +415,118 @@ impl BenchReport {
             .fold(None, |a, x| Some(a.map_or(x, |a: f64| a.max(x))))
     }
 
-    /// The report as a plain-text table.
+    /// Per ray set and thread count, in the order they ran: the fastest raypack method and the
+    /// fastest Embree call (methods whose checksum differs from the reference's are left out).
+    pub fn summary(&self) -> Vec<SummaryRow> {
+        let mut out: Vec<SummaryRow> = Vec::new();
+        let faster = |a: &Option<BenchRow>, r: &BenchRow| a.as_ref().is_none_or(|a| r.mrays_per_s > a.mrays_per_s);
+        for r in self.rows.iter().filter(|r| !r.checksum_differs) {
+            let i = match out.iter().position(|s| s.rays == r.rays && s.threads == r.threads) {
+                Some(i) => i,
+                None if r.tracer == "raypack" => {
+                    out.push(SummaryRow { rays: r.rays, threads: r.threads, raypack: r.clone(), embree: None });
+                    continue;
+                }
+                None => continue,
+            };
+            let s = &mut out[i];
+            if r.tracer == "raypack" && r.mrays_per_s > s.raypack.mrays_per_s {
+                s.raypack = r.clone();
+            } else if r.tracer == "embree" && faster(&s.embree, r) {
+                s.embree = Some(r.clone());
+            }
+        }
+        out
+    }
+
+    /// The one line that names what the figures depend on outside the scene: the CPU and its
+    /// ISA flags, raypack's ISA (and commit), Embree's version and ISA, and the load average
+    /// before and after the run.
+    pub fn header(&self) -> String {
+        let m = &self.machine;
+        let commit = option_env!("RAYPACK_GIT_COMMIT").map_or(String::new(), |c| format!(" {c}"));
+        let embree = self.embree.as_ref().map_or(String::new(), |e| {
+            format!(" | Embree {} ISA {} (inferred from its native packet widths)", e.version, e.isa)
+        });
+        let load = |l: Option<[f64; 3]>| l.map_or("?".into(), |l| format!("{:.2} {:.2} {:.2}", l[0], l[1], l[2]));
+        format!(
+            "machine: {} ({} logical CPUs; {}) | raypack {}{} ISA {}{} | load average {} before, {} after",
+            m.cpu,
+            m.logical_cpus,
+            m.cpu_flags.join(" "),
+            env!("CARGO_PKG_VERSION"),
+            commit,
+            self.raypack_isa,
+            embree,
+            load(self.load.before),
+            load(self.load.after),
+        )
+    }
+
+    /// The warning to print under the header when the machine was busy.
+    pub fn busy_warning(&self) -> Option<String> {
+        self.load.busy_reason(self.machine.logical_cpus).map(|why| {
+            format!(
+                "WARNING: the machine was busy ({why}); the figures and ratios may be off, run again on an idle machine"
+            )
+        })
+    }
+
+    /// The report as text: the scene and ray sets, (with `verbose`) the build figures and
+    /// every method's row, then the header line and the summary table.
+    pub fn text(&self, verbose: bool) -> String {
+        use std::fmt::Write;
+        let mut s = if verbose { self.table() } else { String::new() };
+        if !verbose {
+            let _ = writeln!(
+                s,
+                "scene {} ({} triangles); primary rays {}x{}, diffuse and shadow rays from their hits; median of {} runs",
+                self.scene, self.triangles, self.resolution.0, self.resolution.1, self.runs
+            );
+        } else {
+            s.push('\n');
+        }
+        let _ = writeln!(s, "{}", self.header());
+        if let Some(w) = self.busy_warning() {
+            let _ = writeln!(s, "{w}");
+        }
+        let summary = self.summary();
+        let with_embree = summary.iter().any(|r| r.embree.is_some());
+        let _ = write!(s, "\n{:<8} {:>3}  {:<28} {:>9}", "rays", "thr", "best raypack", "Mrays/s");
+        if with_embree {
+            let _ = writeln!(s, "  {:<28} {:>9} {:>6}  {:<13}", "best Embree", "Mrays/s", "ratio", "ratio min-max");
+        } else {
+            let _ = writeln!(s, "  min-max Mrays/s");
+        }
+        for r in &summary {
+            let _ =
+                write!(s, "{:<8} {:>3}  {:<28} {:>9.2}", r.rays, r.threads, r.raypack.method, r.raypack.mrays_per_s);
+            match (&r.embree, r.ratio(), r.ratio_range()) {
+                (Some(e), Some(ratio), Some((lo, hi))) => {
+                    let _ = writeln!(s, "  {:<28} {:>9.2} {:>5.2}x  {lo:.2}-{hi:.2}x", e.method, e.mrays_per_s, ratio);
+                }
+                _ if with_embree => {
+                    let _ = writeln!(s, "  {:<28} {:>9} {:>6}  -", "-", "-", "-");
+                }
+                _ => {
+                    let _ = writeln!(s, "  {:.2}-{:.2}", r.raypack.mrays_per_s_min, r.raypack.mrays_per_s_max);
+                }
+            }
+        }
+        if with_embree {
+            let _ = writeln!(
+                s,
+                "ratio: best raypack median over best Embree median; min-max: raypack's slowest run over Embree's fastest, and its fastest over Embree's slowest"
+            );
+        }
+        if !verbose {
+            let _ = writeln!(s, "(every method's figures: --verbose or --json)");
+        }
+        s
+    }
+
+    /// The full report as a plain-text table: the setup, the build figures and every
+    /// method's row.
     pub fn table(&self) -> String {
         use std::fmt::Write;
         let mut s = String::new();
@@ -352,9 +580,11 @@ impl BenchReport {
         s
     }
 
-    /// The report as one JSON document:
-    /// `{"scene", "triangles", "build": {...}, "results": [{"rays", "tracer", "method",
-    /// "threads", "mrays_per_s", "hits", "t_sum"}]}`.
+    /// The report as one JSON document (schema 2, `/work/notes/s22/json_contract.md`):
+    /// `{"schema", "date", "scene", "triangles", "resolution", "runs", "notes", "machine",
+    /// "raypack", "embree", "load_average", "busy", "build": {...}, "results": [{"rays",
+    /// "ray_count", "tracer", "method", "threads", "mrays_per_s", "mrays_per_s_min",
+    /// "mrays_per_s_max", "hits", "t_sum"}], "summary": [...]}`.
     pub fn json(&self) -> serde_json::Value {
         use serde_json::{Map, Value, json};
         let mut build = Map::new();
@@ -381,12 +611,50 @@ impl BenchReport {
                     "method": r.method,
                     "threads": r.threads,
                     "mrays_per_s": r.mrays_per_s,
+                    "mrays_per_s_min": r.mrays_per_s_min,
+                    "mrays_per_s_max": r.mrays_per_s_max,
                     "hits": r.checksum.hits,
                     "t_sum": r.checksum.t_sum,
                 })
             })
             .collect();
+        let summary: Vec<Value> = self
+            .summary()
+            .iter()
+            .map(|r| {
+                let range = r.ratio_range();
+                json!({
+                    "rays": r.rays,
+                    "threads": r.threads,
+                    "raypack_method": r.raypack.method,
+                    "raypack_mrays_per_s": r.raypack.mrays_per_s,
+                    "embree_method": r.embree.as_ref().map(|e| &e.method),
+                    "embree_mrays_per_s": r.embree.as_ref().map(|e| e.mrays_per_s),
+                    "ratio": r.ratio(),
+                    "ratio_min": range.map(|r| r.0),
+                    "ratio_max": range.map(|r| r.1),
+                })
+            })
+            .collect();
+        let m = &self.machine;
         json!({
+            "schema": 2,
+            "date": self.date,
+            "machine": {
+                "cpu": m.cpu,
+                "cpu_flags": m.cpu_flags,
+                "logical_cpus": m.logical_cpus,
+                "memory_bytes": m.memory_bytes,
+            },
+            "raypack": {
+                "version": env!("CARGO_PKG_VERSION"),
+                "commit": option_env!("RAYPACK_GIT_COMMIT"),
+                "isa": self.raypack_isa.name(),
+            },
+            "embree": self.embree.as_ref().map(|e| json!({"version": e.version, "isa": e.isa})),
+            "load_average": {"before": self.load.before, "after": self.load.after},
+            "busy": self.busy_warning().is_some(),
+            "summary": summary,
             "scene": self.scene,
             "triangles": self.triangles,
             "resolution": [self.resolution.0, self.resolution.1],
@@ -422,13 +690,15 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     if settings.against_embree && !cfg!(feature = "embree") {
         return Err(BenchError::EmbreeNotBuilt.into());
     }
-    let json_opts = OutputOptions::protecting(&[&a.scene]);
+    let scene_path = a.scene_path();
+    let inputs: Vec<&Path> = scene_path.into_iter().collect();
+    let json_opts = OutputOptions::protecting(&inputs);
     if let Some(p) = a.json.as_deref().filter(|p| *p != Path::new("-")) {
         check_target(p, &json_opts)?;
     }
     let per_ray = raypack::memory::BENCH_BYTES_PER_PIXEL;
     check_memory(width, height, (width * height) as u64 * per_ray, per_ray)?;
-    let (builder, warnings) = load(Some(&a.scene), a.max_primitives)?;
+    let (builder, warnings) = load(scene_path, a.max_primitives)?;
     print_warnings(&warnings);
     let quality: BuildQuality = a.quality.into();
     let t = Instant::now();
@@ -457,15 +727,15 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
         seconds,
         bytes: raypack_accel_bytes(&scene) as u64,
     };
-    let name = a.scene.display().to_string();
+    let name = scene_path.map_or(crate::BUILT_IN_SCENE.to_string(), |p| p.display().to_string());
     let out = run_bench(&name, &mut scene, build, &settings, &mut |line| eprintln!("[raypack] {line}"))?;
     match a.json.as_deref() {
         Some(p) if p == Path::new("-") => println!("{:#}", out.json()),
         Some(p) => {
             write_file_with(p, format!("{:#}\n", out.json()).as_bytes(), &json_opts)?;
-            print!("{}", out.table());
+            print!("{}", out.text(a.verbose));
         }
-        None => print!("{}", out.table()),
+        None => print!("{}", out.text(a.verbose)),
     }
     Ok(())
 }
@@ -500,6 +770,65 @@ mod tests {
         assert_eq!(json["results"].as_array().unwrap().len(), report.rows.len());
         assert!(json["results"][0]["mrays_per_s"].as_f64().unwrap() > 0.0);
         assert!(report.table().contains("bvh2 reference intersect1"));
+    }
+
+    fn row(rays: &'static str, threads: usize, tracer: &'static str, method: &str, mrays: [f64; 3]) -> BenchRow {
+        BenchRow {
+            rays,
+            ray_count: 10,
+            tracer,
+            method: method.into(),
+            threads,
+            mrays_per_s: mrays[1],
+            mrays_per_s_min: mrays[0],
+            mrays_per_s_max: mrays[2],
+            checksum: Checksum::default(),
+            checksum_differs: false,
+        }
+    }
+
+    #[test]
+    fn summary_pairs_the_fastest_of_each_tracer_and_spans_the_runs() {
+        let (mut scene, _) = SceneBuilder::new().commit(&BuildOptions::default());
+        let build = BuildFigures { tracer: "raypack", quality: "medium".into(), seconds: 0.0, bytes: 0 };
+        let settings = BenchSettings { width: 4, height: 4, runs: 1, threads: vec![1], ..Default::default() };
+        let mut report = run_bench("empty", &mut scene, build, &settings, &mut |_| {}).unwrap();
+        let mut wrong = row("primary", 1, "raypack", "wrong", [90.0, 100.0, 110.0]);
+        wrong.checksum_differs = true;
+        report.rows = vec![
+            row("primary", 1, "raypack", "a", [8.0, 10.0, 12.0]),
+            row("primary", 1, "raypack", "b", [18.0, 20.0, 21.0]),
+            wrong,
+            row("primary", 1, "embree", "e1", [4.0, 5.0, 6.0]),
+            row("primary", 1, "embree", "e2", [9.0, 10.0, 12.0]),
+            row("primary", 2, "raypack", "a", [30.0, 30.0, 30.0]),
+        ];
+        let s = report.summary();
+        assert_eq!(s.len(), 2);
+        assert_eq!((s[0].raypack.method.as_str(), s[0].embree.as_ref().unwrap().method.as_str()), ("b", "e2"));
+        assert_eq!(s[0].ratio(), Some(2.0));
+        assert_eq!(s[0].ratio_range(), Some((18.0 / 12.0, 21.0 / 9.0)));
+        assert_eq!((s[1].threads, s[1].embree.as_ref(), s[1].ratio()), (2, None, None));
+        let json = report.json();
+        assert_eq!(json["schema"], 2);
+        assert_eq!(json["summary"][0]["ratio"], 2.0);
+        assert_eq!(json["summary"][0]["embree_method"], "e2");
+        assert!(json["summary"][1]["ratio"].is_null());
+        assert_eq!(json["results"][1]["mrays_per_s_max"], 21.0);
+        assert_eq!(json["machine"]["logical_cpus"], report.machine.logical_cpus);
+        let text = report.text(false);
+        assert!(text.contains("machine: ") && text.contains(" 2.00x  1.50-2.33x"), "{text}");
+        assert!(!text.contains("wrong"));
+    }
+
+    #[test]
+    fn load_is_busy_above_half_the_cpus_or_with_steal() {
+        let idle = Load { before: Some([0.4, 0.3, 0.2]), busy_before: Some(0.05), steal: Some(0.0), ..Load::default() };
+        assert_eq!(idle.busy_reason(2), None);
+        let loaded = Load { before: Some([1.5, 1.0, 1.0]), ..idle.clone() };
+        assert!(loaded.busy_reason(2).unwrap().contains("load average was 1.50 on 2"));
+        let stolen = Load { steal: Some(0.1), ..idle };
+        assert!(stolen.busy_reason(2).unwrap().contains("stole 10.0%"));
     }
 
     #[cfg(not(feature = "embree"))]

@@ -95,8 +95,8 @@ pub struct EmbreeBuildInfo {
 /// Everything `raypack info` prints.
 #[derive(Clone, Debug)]
 pub struct SceneInfo {
-    /// The scene file.
-    pub path: PathBuf,
+    /// The scene file, or the built-in box's name.
+    pub scene: String,
     /// Loader warnings.
     pub warnings: Vec<String>,
     /// Seconds to parse the file into a [`SceneBuilder`].
@@ -137,19 +137,25 @@ pub enum InfoError {
     Embree(String),
 }
 
-/// Loads `path`, commits it at each quality of `opts` (through the cache when asked) and
+/// Loads `path` (the built-in Cornell box when `None`), commits it at each quality of `opts` (through the cache when asked) and
 /// gathers the figures.
-pub fn scene_info(path: &Path, opts: &InfoOptions) -> Result<SceneInfo, InfoError> {
+pub fn scene_info(path: Option<&Path>, opts: &InfoOptions) -> Result<SceneInfo, InfoError> {
     if opts.against_embree && !cfg!(feature = "embree") {
         return Err(InfoError::Embree(
             "--against embree: this raypack was built without Embree; rebuild with `cargo build --release --features embree` (needs Embree 3 or 4: libembree-dev on Debian, or RAYPACK_EMBREE_DIR; see the README)".into(),
         ));
     }
     let t = Instant::now();
-    let (builder, warnings) = raypack::io::load_scene_with_options(path, &opts.load)?;
+    let (builder, warnings) = match path {
+        Some(path) => {
+            let loaded = raypack::io::load_scene_with_options(path, &opts.load)?;
+            (loaded.builder, loaded.warnings)
+        }
+        None => (raypack::io::default_scene(), Vec::new()),
+    };
     let load_seconds = t.elapsed().as_secs_f64();
     let mut info = SceneInfo {
-        path: path.to_path_buf(),
+        scene: path.map_or(crate::BUILT_IN_SCENE.to_string(), |p| p.display().to_string()),
         warnings,
         load_seconds,
         report: CommitReport::default(),
@@ -273,7 +279,7 @@ impl SceneInfo {
         use std::fmt::Write;
         let mut s = String::new();
         let b = &self.bounds;
-        let _ = writeln!(s, "scene        {}", self.path.display());
+        let _ = writeln!(s, "scene        {}", self.scene);
         let _ = writeln!(s, "load         {:.4} s", self.load_seconds);
         let _ = writeln!(s, "primitives   {}", self.report);
         let _ = writeln!(
@@ -387,7 +393,7 @@ impl SceneInfo {
             })
             .collect();
         json!({
-            "scene": self.path.display().to_string(),
+            "scene": self.scene,
             "load_seconds": self.load_seconds,
             "triangles": self.report.triangles,
             "spheres": self.report.spheres,
@@ -434,7 +440,7 @@ pub(crate) fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
         .num_threads(a.threads.unwrap_or(0))
         .build()
         .map_err(|e| CliError::Usage(e.to_string()))?;
-    let info = pool.install(|| scene_info(&a.scene, &opts))?;
+    let info = pool.install(|| scene_info(a.scene_path(), &opts))?;
     print_warnings(&info.warnings);
     for w in info.builds.iter().flat_map(|b| &b.cache_warnings) {
         eprintln!("[raypack] warning: {w}");

@@ -5,6 +5,7 @@
 
 mod bench;
 mod info;
+mod machine;
 mod render;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
@@ -41,8 +42,14 @@ enum AgainstArg {
 
 #[derive(Args)]
 struct BenchArgs {
-    /// Scene file (.dae, .obj, .ply).
-    scene: PathBuf,
+    /// Scene file (.dae, .obj, .ply); omit for the built-in Cornell box.
+    scene: Option<PathBuf>,
+    /// The scene file, as a flag (instead of SCENE).
+    #[arg(long = "scene", value_name = "FILE", conflicts_with = "scene")]
+    scene_flag: Option<PathBuf>,
+    /// Print every method's figures (the JSON always has them), not only the summary.
+    #[arg(short = 'v', long)]
+    verbose: bool,
     /// Also trace the same rays with another tracer.
     #[arg(long, value_enum)]
     against: Option<AgainstArg>,
@@ -55,7 +62,8 @@ struct BenchArgs {
     /// Timed runs per method (the median is reported), after one warm-up run.
     #[arg(long, default_value_t = 5)]
     runs: usize,
-    /// Thread counts to time at, comma-separated (0: all cores; default: 1 and all).
+    /// Thread counts to time at, comma-separated, e.g. `-t 1,2` (0: all cores; default: 1
+    /// and all).
     #[arg(short = 't', long = "threads", value_delimiter = ',')]
     threads: Vec<usize>,
     /// Time only the methods whose name contains one of these, comma-separated (e.g.
@@ -124,10 +132,10 @@ struct RenderArgs {
     /// Worker threads (default: all cores).
     #[arg(short = 't', long = "threads")]
     threads: Option<usize>,
-    /// Camera rays per pixel.
-    #[arg(short = 's', long = "samples", default_value_t = 1)]
+    /// Camera rays per pixel (at least 1).
+    #[arg(short = 's', long = "samples", visible_alias = "spp", default_value_t = 1)]
     samples: u32,
-    /// Shadow rays per area light.
+    /// Shadow rays per area light (at least 1).
     #[arg(short = 'l', long = "light-samples", default_value_t = 1)]
     light_samples: u32,
     /// Maximum ray depth.
@@ -136,12 +144,31 @@ struct RenderArgs {
     /// Image size in pixels.
     #[arg(short = 'r', long = "resolution", num_args = 2, value_names = ["WIDTH", "HEIGHT"], default_values_t = [480, 360])]
     resolution: Vec<usize>,
-    /// Output image (.png, or .exr for linear radiance); default: SCENE's name with .png.
-    #[arg(short = 'f', long = "output")]
+    /// Output image: .png (8-bit sRGB) or .exr (linear radiance), `-` for PNG on standard
+    /// output; default: SCENE's name with .png.
+    #[arg(short = 'f', long = "output", visible_short_alias = 'o', visible_alias = "outfile")]
     output: Option<PathBuf>,
-    /// CS184 camera settings file to render from.
+    /// CS184 camera settings file to render from (the format: README, or --write-camera).
     #[arg(short = 'c', long = "camera")]
     camera: Option<PathBuf>,
+    /// Place the camera at the eye E looking at the target T (over the scene's or -c's camera).
+    #[arg(long, num_args = 6, value_names = ["EX", "EY", "EZ", "TX", "TY", "TZ"], allow_negative_numbers = true)]
+    lookat: Option<Vec<f32>>,
+    /// The camera's up direction (default: the scene's or -c's camera's up).
+    #[arg(long, num_args = 3, value_names = ["UX", "UY", "UZ"], allow_negative_numbers = true)]
+    up: Option<Vec<f32>>,
+    /// Vertical field of view in degrees, in (0, 180); the horizontal one follows the image's
+    /// aspect ratio.
+    #[arg(long, value_name = "DEG", allow_negative_numbers = true)]
+    fov: Option<f32>,
+    /// Write the camera this render would use (the scene's, -c's or the framing one, after
+    /// --lookat/--up/--fov) to FILE as a commented CS184 camera file for -c, and exit
+    /// without rendering.
+    #[arg(long, value_name = "FILE")]
+    write_camera: Option<PathBuf>,
+    /// No progress or statistics lines (warnings and errors are still printed).
+    #[arg(short = 'q', long)]
+    quiet: bool,
     /// Adaptive sampling: batch size and tolerance.
     #[arg(short = 'a', long = "adaptive", num_args = 2, value_names = ["BATCH", "TOLERANCE"])]
     adaptive: Option<Vec<f32>>,
@@ -229,8 +256,11 @@ impl From<QualityArg> for BuildQuality {
 
 #[derive(Args)]
 struct InfoArgs {
-    /// Scene file (.dae, .obj, .ply).
-    scene: PathBuf,
+    /// Scene file (.dae, .obj, .ply); omit for the built-in Cornell box.
+    scene: Option<PathBuf>,
+    /// The scene file, as a flag (instead of SCENE).
+    #[arg(long = "scene", value_name = "FILE", conflicts_with = "scene")]
+    scene_flag: Option<PathBuf>,
     /// Check the BVH's structural invariants.
     #[arg(long)]
     validate: bool,
@@ -266,6 +296,23 @@ struct InfoArgs {
     max_primitives: Option<u64>,
 }
 
+/// How reports name the scene used when none is given.
+const BUILT_IN_SCENE: &str = "built-in Cornell box (scenes/cornell.dae)";
+
+impl BenchArgs {
+    /// SCENE or `--scene`; `None`: the built-in Cornell box.
+    fn scene_path(&self) -> Option<&Path> {
+        self.scene.as_deref().or(self.scene_flag.as_deref())
+    }
+}
+
+impl InfoArgs {
+    /// SCENE or `--scene`; `None`: the built-in Cornell box.
+    fn scene_path(&self) -> Option<&Path> {
+        self.scene.as_deref().or(self.scene_flag.as_deref())
+    }
+}
+
 /// Parses `--isa`, refusing a tier the CPU lacks.
 fn parse_isa(s: &str) -> Result<Isa, String> {
     Isa::parse(s).and_then(Isa::check).map_err(|e| e.to_string())
@@ -293,6 +340,18 @@ fn main() -> ExitCode {
     // CS184 style: `raypack scene.dae -t 8 ...` means `raypack render scene.dae -t 8 ...`.
     let known = ["render", "info", "bench", "help", "-h", "--help", "-V", "--version"];
     if args.len() > 1 && !known.iter().any(|k| args[1] == *k) {
+        // A scene file (or a flag of `render`) means `render`; any other first word is a
+        // mistyped subcommand, not a scene of an unsupported format.
+        let first = Path::new(&args[1]);
+        let is_flag = args[1].to_string_lossy().starts_with('-');
+        if !is_flag && !first.exists() && raypack::io::SceneFormat::from_path(first).is_none() {
+            eprintln!(
+                "raypack: error: unknown command '{}'; the commands are render, info, bench and help \
+                 (`raypack SCENE` renders a .dae, .obj or .ply file; `raypack --help` lists the flags)",
+                args[1].to_string_lossy()
+            );
+            return ExitCode::from(2);
+        }
         args.insert(1, "render".into());
     }
     let cli = match Cli::try_parse_from(args) {
@@ -331,7 +390,10 @@ fn main() -> ExitCode {
 fn load(scene: Option<&Path>, max_primitives: Option<u64>) -> Result<(SceneBuilder, Vec<String>), CliError> {
     let opts = raypack::io::LoadOptions { max_primitives };
     Ok(match scene {
-        Some(p) => raypack::io::load_scene_with_options(p, &opts)?,
+        Some(p) => {
+            let loaded = raypack::io::load_scene_with_options(p, &opts)?;
+            (loaded.builder, loaded.warnings)
+        }
         None => (raypack::io::default_scene(), Vec::new()),
     })
 }
@@ -362,14 +424,20 @@ fn print_warnings(warnings: &[String]) {
     }
 }
 
-fn commit(builder: SceneBuilder, opts: &BuildOptions, cache: Option<&Path>) -> Scene {
+/// Commits `builder` (through the cache in `cache`), printing what it did unless `quiet`;
+/// warnings are always printed.
+fn commit(builder: SceneBuilder, opts: &BuildOptions, cache: Option<&Path>, quiet: bool) -> Scene {
     let n = builder.num_triangles() + builder.num_spheres();
     let t = Instant::now();
     let (scene, report) = match cache {
         None => {
-            eprint!("[raypack] Building BVH from {n} primitives... ");
+            if !quiet {
+                eprint!("[raypack] Building BVH from {n} primitives... ");
+            }
             let r = builder.commit(opts);
-            eprintln!("Done! ({:.4} sec)", t.elapsed().as_secs_f64());
+            if !quiet {
+                eprintln!("Done! ({:.4} sec)", t.elapsed().as_secs_f64());
+            }
             r
         }
         Some(dir) => {
@@ -378,11 +446,13 @@ fn commit(builder: SceneBuilder, opts: &BuildOptions, cache: Option<&Path>) -> S
                 eprintln!("[raypack] warning: {w}");
             }
             let how = if cache.loaded { "Loaded BVH of" } else { "Built BVH (and cached it) from" };
-            eprintln!(
-                "[raypack] {how} {n} primitives: {} ({:.4} sec)",
-                cache.path.display(),
-                t.elapsed().as_secs_f64()
-            );
+            if !quiet {
+                eprintln!(
+                    "[raypack] {how} {n} primitives: {} ({:.4} sec)",
+                    cache.path.display(),
+                    t.elapsed().as_secs_f64()
+                );
+            }
             (scene, report)
         }
     };

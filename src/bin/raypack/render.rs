@@ -2,8 +2,9 @@
 //! and writes the image (and the sample-rate image with `-a`) whole or not at all.
 
 use crate::{CliError, RenderArgs, check_memory, commit, load, print_warnings};
+use raypack::math::Vec3;
 use raypack::render::{self, RenderSettings};
-use raypack::{BuildOptions, Scene};
+use raypack::{BuildOptions, Camera, Scene};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -23,6 +24,22 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
     if a.threads == Some(0) {
         return Err(CliError::Usage("-t 0: need at least one thread".into()));
     }
+    let view = CameraFlags::parse(&a)?;
+    let quiet = a.quiet;
+    // Values raised to the least that works, said aloud (a warning, not a silent change).
+    if a.samples == 0 {
+        eprintln!("[raypack] warning: -s 0: rendering 1 sample per pixel (the least)");
+    }
+    if a.light_samples == 0 {
+        eprintln!("[raypack] warning: -l 0: taking 1 shadow ray per area light (the least)");
+    }
+    if let Some((batch, _)) = adaptive.filter(|&(batch, _)| batch > a.samples.max(1)) {
+        eprintln!(
+            "[raypack] warning: -a {batch}: the batch is larger than the {} samples per pixel of -s; batches of {} are used",
+            a.samples.max(1),
+            a.samples.max(1)
+        );
+    }
     let output = a.output.clone().unwrap_or_else(|| {
         let stem = a.scene.as_ref().and_then(|s| s.file_stem()).map(|s| s.to_string_lossy().into_owned());
         PathBuf::from(format!("{}.png", stem.as_deref().unwrap_or("cornell")))
@@ -40,6 +57,19 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         for p in std::iter::once(&output).chain(&rate_path) {
             raypack::io::output::check_target(p, &out_opts)?;
         }
+        if render::ImageFormat::for_path(&output).is_none() {
+            let can: Vec<String> =
+                render::ImageFormat::EXTENSIONS.iter().map(|(ext, what)| format!(".{ext} ({what})")).collect();
+            return Err(CliError::Usage(format!(
+                "-o {}: raypack cannot write .{} images; it writes {}",
+                output.display(),
+                output.extension().unwrap_or_default().to_string_lossy(),
+                can.join(" and ")
+            )));
+        }
+    }
+    if let Some(p) = &a.write_camera {
+        raypack::io::output::check_target(p, &out_opts)?;
     }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.unwrap_or(0))
@@ -70,15 +100,19 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         )?;
         // Read before the scene: a bad camera file fails at once.
         let file_camera = a.camera.as_deref().map(raypack::io::camera_file::load_camera_file).transpose()?;
-        eprint!("[raypack] Collecting primitives... ");
+        if !quiet {
+            eprint!("[raypack] Collecting primitives... ");
+        }
         let t = Instant::now();
         let (builder, warnings) = load(a.scene.as_deref(), a.max_primitives)?;
         let load_time = t.elapsed().as_secs_f64();
-        eprintln!("Done! ({load_time:.4} sec)");
+        if !quiet {
+            eprintln!("Done! ({load_time:.4} sec)");
+        }
         print_warnings(&warnings);
         let opts = BuildOptions { quality: a.quality.into(), watertight: a.watertight, ..BuildOptions::default() };
         let t = Instant::now();
-        let mut scene = commit(builder, &opts, a.bvh_cache.as_deref());
+        let mut scene = commit(builder, &opts, a.bvh_cache.as_deref(), quiet);
         let setup_time = [("load", load_time), ("BVH build", t.elapsed().as_secs_f64())];
         if let Some(isa) = a.isa {
             scene.set_isa(isa).map_err(|e| CliError::Usage(e.to_string()))?;
@@ -91,24 +125,46 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             });
         }
         let aspect = width as f32 / height as f32;
-        let camera = file_camera.unwrap_or_else(|| scene.camera_or_framing(aspect));
-        let bar = progress_bar(width.div_ceil(render::TILE) * height.div_ceil(render::TILE));
-        eprintln!(
-            "[raypack] Rendering {width}x{height} with {} threads ({} kernels)...",
-            rayon::current_num_threads(),
-            scene.isa()
-        );
+        let camera =
+            view.apply(file_camera.unwrap_or_else(|| scene.camera_or_framing(aspect)), aspect, &scene.bounds())?;
+        if let Some(p) = &a.write_camera {
+            let text = raypack::io::camera_file::format_camera_file(&camera, view.target(), (width, height));
+            raypack::io::output::write_file_with(p, text.as_bytes(), &out_opts)?;
+            eprintln!("[raypack] Wrote the camera to {} (render from it with -c {0}); nothing rendered.", p.display());
+            return Ok(());
+        }
+        if let Some(why) = hemisphere_sees_no_light(&scene, &settings) {
+            eprintln!("[raypack] warning: -H: {why}");
+        }
+        let tiles = width.div_ceil(render::TILE) * height.div_ceil(render::TILE);
+        let bar = if quiet { indicatif::ProgressBar::hidden() } else { progress_bar(tiles) };
+        if !quiet {
+            eprintln!(
+                "[raypack] Rendering {width}x{height} with {} threads ({} kernels)...",
+                rayon::current_num_threads(),
+                scene.isa()
+            );
+        }
         let out = render::render(&scene, &camera, &settings, &|done| bar.set_position(done));
         bar.finish_and_clear();
-        eprintln!("[raypack] Rendering... 100%! ({:.4}s)", out.stats.time.as_secs_f64());
-        report(&scene, &settings, &out, setup_time);
+        if !quiet {
+            eprintln!("[raypack] Rendering... 100%! ({:.4}s)", out.stats.time.as_secs_f64());
+            report(&scene, &settings, &out, setup_time);
+        } else if out.stats.invalid_samples > 0 {
+            eprintln!(
+                "[raypack] warning: {} samples were NaN or infinite and counted as black.",
+                out.stats.invalid_samples
+            );
+        }
         let t = Instant::now();
         let encode = |film: &render::Film, path: &Path, format, encoding| {
             film.encode(format, encoding).map_err(|message| render::ImageError::Encode { path: path.into(), message })
         };
         let image = encode(&out.film, &output, format, settings.integrator.encoding())?;
         if to_stdout {
-            eprint!("[raypack] Writing the image to standard output... ");
+            if !quiet {
+                eprint!("[raypack] Writing the image to standard output... ");
+            }
             use std::io::Write;
             let mut stdout = std::io::stdout().lock();
             stdout
@@ -117,20 +173,129 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
                 .map_err(|source| render::ImageError::Io { path: output.clone(), source })?;
         } else {
             use raypack::io::output::{commit_all, stage};
-            eprint!("[raypack] Saving to file: {}... ", output.display());
+            if !quiet {
+                eprint!("[raypack] Saving to file: {}... ", output.display());
+            }
             let mut files = vec![stage(&output, &out_opts, &mut |w| w.write_all(&image))?];
             if let (Some(rate), Some((batch, tol))) = (&rate_path, settings.adaptive) {
                 let spp = settings.samples_per_pixel;
                 let film = render::adaptive::rate_film(&out.samples_per_pixel, width, height, spp);
                 let bytes = encode(&film, rate, render::ImageFormat::Png, render::Encoding::Display)?;
                 files.push(stage(rate, &out_opts, &mut |w| w.write_all(&bytes))?);
-                eprint!("(sample rate: {}, batch {batch}, tolerance {tol}) ", rate.display());
+                if !quiet {
+                    eprint!("(sample rate: {}, batch {batch}, tolerance {tol}) ", rate.display());
+                }
             }
             // The image and its sample-rate image: both or neither.
             commit_all(files)?;
         }
-        eprintln!("Done! ({:.4} sec)", t.elapsed().as_secs_f64());
+        if !quiet {
+            eprintln!("Done! ({:.4} sec)", t.elapsed().as_secs_f64());
+        }
         Ok(())
+    })
+}
+
+/// `--lookat`, `--up` and `--fov`, checked.
+struct CameraFlags {
+    /// Eye and target.
+    lookat: Option<(Vec3, Vec3)>,
+    up: Option<Vec3>,
+    /// Vertical field of view, degrees.
+    fov: Option<f32>,
+}
+
+impl CameraFlags {
+    /// Refuses non-finite numbers, a field of view outside (0, 180) degrees, an eye on its
+    /// target and a zero up vector; the up vector's angle to the view is checked in `apply`.
+    fn parse(a: &RenderArgs) -> Result<Self, CliError> {
+        let usage = |m: String| Err(CliError::Usage(m));
+        let vec = |v: &[f32]| Vec3::new(v[0], v[1], v[2]);
+        for (flag, v) in
+            [("--lookat", a.lookat.as_deref()), ("--up", a.up.as_deref()), ("--fov", a.fov.as_slice().into())]
+        {
+            if let Some(x) = v.into_iter().flatten().find(|x| !x.is_finite()) {
+                return usage(format!("{flag}: {x} is not a finite number"));
+            }
+        }
+        if let Some(fov) = a.fov.filter(|f| !(*f > 0.0 && *f < 180.0)) {
+            return usage(format!(
+                "--fov {fov}: the vertical field of view must be between 0 and 180 degrees (exclusive)"
+            ));
+        }
+        let lookat = a.lookat.as_deref().map(|v| (vec(&v[..3]), vec(&v[3..])));
+        if let Some((eye, _)) =
+            lookat.filter(|(e, t)| (*e - *t).length() <= 1e-6 * e.abs().max(t.abs()).max_element().max(1.0))
+        {
+            return usage(format!(
+                "--lookat: the eye and the target are the same point ({} {} {}); the camera needs a direction to look in",
+                eye.x, eye.y, eye.z
+            ));
+        }
+        let up = a.up.as_deref().map(vec);
+        if up.is_some_and(|u| u.length_squared() == 0.0) {
+            return usage("--up 0 0 0: the up vector must not be zero".into());
+        }
+        if let (Some((eye, target)), Some(up)) = (lookat, up) {
+            check_up(up, target - eye, "--up")?;
+        }
+        Ok(Self { lookat, up, fov: a.fov })
+    }
+
+    /// The target of `--lookat`, for `--write-camera`.
+    fn target(&self) -> Option<Vec3> {
+        self.lookat.map(|(_, t)| t)
+    }
+
+    /// `camera` with the flags applied over it; `aspect` (width / height) gives the horizontal
+    /// field of view when `--fov` sets the vertical one. A moved eye keeps the camera's near
+    /// clip distance, and its far one grows to reach all of `bounds`.
+    fn apply(&self, camera: Camera, aspect: f32, bounds: &raypack::math::Aabb) -> Result<Camera, CliError> {
+        let mut cam = camera;
+        if self.lookat.is_some() || self.up.is_some() {
+            let (eye, target) = self.lookat.unwrap_or((cam.position, cam.position + cam.view_dir()));
+            let up = self.up.unwrap_or(cam.c2w.y_axis);
+            check_up(up, target - eye, if self.up.is_some() { "--up" } else { "the camera's up vector (give --up)" })?;
+            let mut placed = Camera::look_at(eye, target, up, cam.vfov_deg, aspect, cam.near, cam.far);
+            placed.hfov_deg = cam.hfov_deg;
+            if bounds.is_valid() {
+                let reach = (eye - bounds.center()).length() + bounds.extent().length() * 0.5;
+                placed.far = placed.far.max(reach * 1.01);
+            }
+            cam = placed;
+        }
+        if let Some(fov) = self.fov {
+            cam.vfov_deg = fov;
+            cam.set_aspect(aspect);
+        }
+        Ok(cam)
+    }
+}
+
+/// Refuses an up vector parallel to the view direction `view` (nonzero): the camera's roll
+/// would be undefined.
+fn check_up(up: Vec3, view: Vec3, which: &str) -> Result<(), CliError> {
+    let (u, v) = (up.normalize(), view.normalize());
+    if u.cross(v).length() >= 1e-4 {
+        return Ok(());
+    }
+    let show = |w: Vec3| format!("({:.3} {:.3} {:.3})", w.x + 0.0, w.y + 0.0, w.z + 0.0);
+    Err(CliError::Usage(format!(
+        "{which} {} is parallel to the view direction {}; the camera's roll is undefined",
+        show(up),
+        show(v)
+    )))
+}
+
+/// Why `-H` renders black, when it will: uniform hemisphere sampling finds light only by
+/// hitting an emitter, and a point, directional or spot light cannot be hit.
+fn hemisphere_sees_no_light(scene: &Scene, settings: &RenderSettings) -> Option<String> {
+    let lit = !matches!(settings.integrator, render::IntegratorKind::Normals);
+    let only_deltas = scene.lights.iter().all(|l| l.is_delta()) && !scene.materials.iter().any(|m| m.is_emissive());
+    (settings.hemisphere_sampling && lit && only_deltas).then(|| {
+        "this scene's only lights are point, directional or spot lights, which hemisphere sampling can never hit, \
+         so the image is black (as in CS184); drop -H to sample the lights"
+            .to_string()
     })
 }
 

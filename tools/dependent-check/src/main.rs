@@ -36,7 +36,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         i += 2;
     }
-    let builder = raypack::io::load_scene(std::path::Path::new(scene_path))?;
+    let builder = raypack::io::load_scene(std::path::Path::new(scene_path))?.builder;
     let opts = BuildOptions { keep_bvh2: true, ..BuildOptions::default() };
     let (mut scene, _) = builder.commit(&opts);
     scene.set_isa(isa)?;
