@@ -4,6 +4,7 @@
 //! equivalent. `raypack SCENE [flags]` without a subcommand means `raypack render`.
 
 mod bench;
+mod heatmap;
 mod info;
 mod render;
 
@@ -102,18 +103,23 @@ enum IntegratorArg {
     IndirectOnly,
     /// Exactly -m bounces.
     Bounce,
+    /// Traversal cost per pixel: the BVH kernel's node visits or primitive tests for one ray
+    /// per pixel (--heatmap, --heatmap-rays), coloured with viridis and a labelled colour bar.
+    Heatmap,
 }
 
-impl From<IntegratorArg> for IntegratorKind {
-    fn from(a: IntegratorArg) -> Self {
-        match a {
+impl IntegratorArg {
+    /// The path tracer's integrator; `None` for the heatmap, which is not one.
+    fn kind(self) -> Option<IntegratorKind> {
+        Some(match self {
             IntegratorArg::Normals => IntegratorKind::Normals,
             IntegratorArg::Direct => IntegratorKind::Direct,
             IntegratorArg::Global => IntegratorKind::Global,
             IntegratorArg::DirectOnly => IntegratorKind::DirectOnly,
             IntegratorArg::IndirectOnly => IntegratorKind::IndirectOnly,
             IntegratorArg::Bounce => IntegratorKind::Bounce,
-        }
+            IntegratorArg::Heatmap => return None,
+        })
     }
 }
 
@@ -151,6 +157,12 @@ struct RenderArgs {
     /// What to compute per camera ray.
     #[arg(long, value_enum, default_value_t = IntegratorArg::Global)]
     integrator: IntegratorArg,
+    /// With --integrator heatmap: which count the image shows.
+    #[arg(long, value_enum, default_value_t = heatmap::ViewArg::Nodes)]
+    heatmap: heatmap::ViewArg,
+    /// With --integrator heatmap: count camera rays, or shadow rays toward the first light.
+    #[arg(long, value_enum, default_value_t = heatmap::RaysArg::Camera)]
+    heatmap_rays: heatmap::RaysArg,
     /// Never terminate paths early by Russian roulette (only -m ends them).
     #[arg(long)]
     no_russian_roulette: bool,

@@ -9,6 +9,7 @@ use std::time::Instant;
 
 /// `raypack render`: checks the flags, the output paths and the memory, then renders.
 pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
+    let Some(integrator) = a.integrator.kind() else { return crate::heatmap::cmd_heatmap(a) };
     let (width, height) = (a.resolution[0], a.resolution[1]);
     if width == 0 || height == 0 || width > 1 << 15 || height > 1 << 15 {
         return Err(CliError::Usage(format!("-r {width} {height}: width and height must be between 1 and 32768")));
@@ -54,7 +55,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             max_depth: a.max_depth,
             hemisphere_sampling: a.hemisphere,
             adaptive,
-            integrator: a.integrator.into(),
+            integrator,
             seed: a.seed,
             brute_force: a.brute_force,
             russian_roulette: !a.no_russian_roulette,
