@@ -6,6 +6,7 @@
 mod bench;
 mod heatmap;
 mod info;
+mod rays;
 mod render;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
@@ -50,6 +51,15 @@ struct BenchArgs {
     /// Write the figures as JSON to this file (`-` for standard output).
     #[arg(long)]
     json: Option<PathBuf>,
+    /// Time the kernels on the rays of this file instead of the built-in sets: `.rays` (8
+    /// little-endian f32 per ray: origin xyz, direction xyz, tnear, tfar) or `.npy` (float32,
+    /// shape (N, 8)), traced as closest-hit rays.
+    #[arg(long, value_name = "FILE")]
+    rays: Option<PathBuf>,
+    /// Write the built-in ray sets (primary, diffuse, shadow) to this directory as
+    /// NAME.rays and NAME.npy before timing them.
+    #[arg(long, value_name = "DIR", conflicts_with = "rays")]
+    dump_rays: Option<PathBuf>,
     /// Primary-ray image size.
     #[arg(short = 'r', long = "resolution", num_args = 2, value_names = ["WIDTH", "HEIGHT"], default_values_t = [1024, 768])]
     resolution: Vec<usize>,
@@ -296,6 +306,8 @@ enum CliError {
     Bench(#[from] bench::BenchError),
     #[error(transparent)]
     Output(#[from] raypack::io::output::OutputError),
+    #[error(transparent)]
+    Rays(#[from] raypack::io::rays::RayFileError),
     #[error("{0}")]
     Usage(String),
 }
