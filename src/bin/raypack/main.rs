@@ -140,15 +140,15 @@ struct RenderArgs {
     /// Worker threads (default: all cores).
     #[arg(short = 't', long = "threads")]
     threads: Option<usize>,
-    /// Camera rays per pixel.
-    #[arg(short = 's', long = "samples", default_value_t = 1)]
-    samples: u32,
-    /// Shadow rays per area light.
-    #[arg(short = 'l', long = "light-samples", default_value_t = 1)]
-    light_samples: u32,
-    /// Maximum ray depth.
-    #[arg(short = 'm', long = "max-depth", default_value_t = 1)]
-    max_depth: u32,
+    /// Camera rays per pixel [default: 1, as CS184; the built-in Cornell box: 128].
+    #[arg(short = 's', long = "samples")]
+    samples: Option<u32>,
+    /// Shadow rays per area light [default: 1; the built-in Cornell box: 2].
+    #[arg(short = 'l', long = "light-samples")]
+    light_samples: Option<u32>,
+    /// Maximum ray depth [default: 1; the built-in Cornell box: 5].
+    #[arg(short = 'm', long = "max-depth")]
+    max_depth: Option<u32>,
     /// Image size in pixels.
     #[arg(short = 'r', long = "resolution", num_args = 2, value_names = ["WIDTH", "HEIGHT"], default_values_t = [480, 360])]
     resolution: Vec<usize>,
