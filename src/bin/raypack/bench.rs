@@ -474,6 +474,13 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
         }
         None => print!("{}", out.table()),
     }
+    if let Some(dir) = &a.report {
+        let json = dir.join("bench.json");
+        std::fs::create_dir_all(dir).map_err(|e| CliError::Usage(format!("{}: {e}", dir.display())))?;
+        write_file_with(&json, format!("{:#}\n", out.json()).as_bytes(), &json_opts)?;
+        crate::report::write_report(&[json], dir)?;
+        eprintln!("[raypack] report: {}", dir.join("index.html").display());
+    }
     Ok(())
 }
 

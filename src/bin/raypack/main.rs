@@ -8,6 +8,7 @@ mod heatmap;
 mod info;
 mod rays;
 mod render;
+mod report;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use raypack::io::LoadError;
@@ -33,6 +34,19 @@ enum Command {
     /// Time raypack's kernels (and Embree's, with --against embree) on primary, diffuse
     /// and shadow rays.
     Bench(BenchArgs),
+    /// Combine `raypack bench --json` files into one report: index.html with inline SVG
+    /// charts, and the charts as PNG.
+    Report(ReportArgs),
+}
+
+#[derive(Args)]
+struct ReportArgs {
+    /// Bench JSON files (other machines, commits or scenes).
+    #[arg(required = true)]
+    json: Vec<PathBuf>,
+    /// Directory to write index.html and the PNG charts into.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -56,6 +70,9 @@ struct BenchArgs {
     /// shape (N, 8)), traced as closest-hit rays.
     #[arg(long, value_name = "FILE")]
     rays: Option<PathBuf>,
+    /// Also write a report (index.html with inline SVG charts, and PNG charts) into DIR.
+    #[arg(long, value_name = "DIR")]
+    report: Option<PathBuf>,
     /// Write the built-in ray sets (primary, diffuse, shadow) to this directory as
     /// NAME.rays and NAME.npy before timing them.
     #[arg(long, value_name = "DIR", conflicts_with = "rays")]
@@ -315,7 +332,7 @@ enum CliError {
 fn main() -> ExitCode {
     let mut args: Vec<std::ffi::OsString> = std::env::args_os().collect();
     // CS184 style: `raypack scene.dae -t 8 ...` means `raypack render scene.dae -t 8 ...`.
-    let known = ["render", "info", "bench", "help", "-h", "--help", "-V", "--version"];
+    let known = ["render", "info", "bench", "report", "help", "-h", "--help", "-V", "--version"];
     if args.len() > 1 && !known.iter().any(|k| args[1] == *k) {
         args.insert(1, "render".into());
     }
@@ -341,6 +358,7 @@ fn main() -> ExitCode {
         Command::Render(a) => render::cmd_render(a),
         Command::Info(a) => info::cmd_info(a),
         Command::Bench(a) => bench::cmd_bench(a),
+        Command::Report(a) => report::write_report(&a.json, &a.out),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
