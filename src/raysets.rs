@@ -37,6 +37,8 @@ pub enum RaySetKind {
     Random,
     /// Rays aimed at mesh vertices and edges.
     EdgesVertices,
+    /// Rays read from a ray file ([`crate::io::rays`]), traced as closest-hit rays.
+    File,
 }
 
 impl RaySetKind {
@@ -48,6 +50,7 @@ impl RaySetKind {
             RaySetKind::Shadow => "shadow",
             RaySetKind::Random => "random",
             RaySetKind::EdgesVertices => "edges",
+            RaySetKind::File => "file",
         }
     }
 
@@ -58,7 +61,7 @@ impl RaySetKind {
 }
 
 /// A named set of rays.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct RaySet {
     /// Which set.
     pub kind: RaySetKind,

@@ -19,6 +19,7 @@ pub mod input;
 pub mod obj;
 pub mod output;
 pub mod ply;
+pub mod rays;
 
 pub use dae::{CameraPlacement, DaeOptions};
 pub use error::LoadError;

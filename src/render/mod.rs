@@ -11,8 +11,10 @@
 pub mod adaptive;
 pub mod bsdf;
 pub mod camera;
+pub mod colorbar;
 pub mod film;
 pub mod frame;
+pub mod heatmap;
 pub mod integrator;
 pub mod light;
 pub mod order;

@@ -63,6 +63,8 @@ pub struct BenchSettings {
     /// Time only the methods whose name contains one of these (all when empty); the
     /// reference still runs once per set for the checksums.
     pub methods: Vec<String>,
+    /// The ray sets to time; `None`: [`raysets::bench_sets`] at `width × height`.
+    pub ray_sets: Option<Vec<raysets::RaySet>>,
 }
 
 impl Default for BenchSettings {
@@ -76,6 +78,7 @@ impl Default for BenchSettings {
             seed: 1,
             isa: None,
             methods: Vec::new(),
+            ray_sets: None,
         }
     }
 }
@@ -324,7 +327,10 @@ pub fn run_bench(
     }
 
     log(&format!("making ray sets at {}x{}", settings.width, settings.height));
-    let sets = raysets::bench_sets(scene, settings.width, settings.height, settings.seed);
+    let sets = match &settings.ray_sets {
+        Some(sets) => sets.clone(),
+        None => raysets::bench_sets(scene, settings.width, settings.height, settings.seed).to_vec(),
+    };
     let all = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
     for set in &sets {
         let occlusion = set.kind.is_occlusion();
@@ -677,7 +683,7 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     if a.runs == 0 {
         return Err(CliError::Usage("--runs 0: need at least one timed run".into()));
     }
-    let settings = BenchSettings {
+    let mut settings = BenchSettings {
         width,
         height,
         runs: a.runs,
@@ -727,6 +733,7 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
         seconds,
         bytes: raypack_accel_bytes(&scene) as u64,
     };
+    settings.ray_sets = crate::rays::ray_sets(&a, &scene, &settings)?;
     let name = scene_path.map_or(crate::BUILT_IN_SCENE.to_string(), |p| p.display().to_string());
     let out = run_bench(&name, &mut scene, build, &settings, &mut |line| eprintln!("[raypack] {line}"))?;
     match a.json.as_deref() {
@@ -736,6 +743,13 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
             print!("{}", out.text(a.verbose));
         }
         None => print!("{}", out.text(a.verbose)),
+    }
+    if let Some(dir) = &a.report {
+        let json = dir.join("bench.json");
+        std::fs::create_dir_all(dir).map_err(|e| CliError::Usage(format!("{}: {e}", dir.display())))?;
+        write_file_with(&json, format!("{:#}\n", out.json()).as_bytes(), &json_opts)?;
+        crate::report::write_report(&[json], dir)?;
+        eprintln!("[raypack] report: {}", dir.join("index.html").display());
     }
     Ok(())
 }

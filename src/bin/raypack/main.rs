@@ -4,9 +4,12 @@
 //! equivalent. `raypack SCENE [flags]` without a subcommand means `raypack render`.
 
 mod bench;
+mod heatmap;
 mod info;
 mod machine;
+mod rays;
 mod render;
+mod report;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use raypack::io::LoadError;
@@ -32,6 +35,19 @@ enum Command {
     /// Time raypack's kernels (and Embree's, with --against embree) on primary, diffuse
     /// and shadow rays.
     Bench(BenchArgs),
+    /// Combine `raypack bench --json` files into one report: index.html with inline SVG
+    /// charts, and the charts as PNG.
+    Report(ReportArgs),
+}
+
+#[derive(Args)]
+struct ReportArgs {
+    /// Bench JSON files (other machines, commits or scenes).
+    #[arg(required = true)]
+    json: Vec<PathBuf>,
+    /// Directory to write index.html and the PNG charts into.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -56,6 +72,18 @@ struct BenchArgs {
     /// Write the figures as JSON to this file (`-` for standard output).
     #[arg(long)]
     json: Option<PathBuf>,
+    /// Time the kernels on the rays of this file instead of the built-in sets: `.rays` (8
+    /// little-endian f32 per ray: origin xyz, direction xyz, tnear, tfar) or `.npy` (float32,
+    /// shape (N, 8)), traced as closest-hit rays.
+    #[arg(long, value_name = "FILE")]
+    rays: Option<PathBuf>,
+    /// Also write a report (index.html with inline SVG charts, and PNG charts) into DIR.
+    #[arg(long, value_name = "DIR")]
+    report: Option<PathBuf>,
+    /// Write the built-in ray sets (primary, diffuse, shadow) to this directory as
+    /// NAME.rays and NAME.npy before timing them.
+    #[arg(long, value_name = "DIR", conflicts_with = "rays")]
+    dump_rays: Option<PathBuf>,
     /// Primary-ray image size.
     #[arg(short = 'r', long = "resolution", num_args = 2, value_names = ["WIDTH", "HEIGHT"], default_values_t = [1024, 768])]
     resolution: Vec<usize>,
@@ -110,18 +138,23 @@ enum IntegratorArg {
     IndirectOnly,
     /// Exactly -m bounces.
     Bounce,
+    /// Traversal cost per pixel: the BVH kernel's node visits or primitive tests for one ray
+    /// per pixel (--heatmap, --heatmap-rays), coloured with viridis and a labelled colour bar.
+    Heatmap,
 }
 
-impl From<IntegratorArg> for IntegratorKind {
-    fn from(a: IntegratorArg) -> Self {
-        match a {
+impl IntegratorArg {
+    /// The path tracer's integrator; `None` for the heatmap, which is not one.
+    fn kind(self) -> Option<IntegratorKind> {
+        Some(match self {
             IntegratorArg::Normals => IntegratorKind::Normals,
             IntegratorArg::Direct => IntegratorKind::Direct,
             IntegratorArg::Global => IntegratorKind::Global,
             IntegratorArg::DirectOnly => IntegratorKind::DirectOnly,
             IntegratorArg::IndirectOnly => IntegratorKind::IndirectOnly,
             IntegratorArg::Bounce => IntegratorKind::Bounce,
-        }
+            IntegratorArg::Heatmap => return None,
+        })
     }
 }
 
@@ -132,15 +165,15 @@ struct RenderArgs {
     /// Worker threads (default: all cores).
     #[arg(short = 't', long = "threads")]
     threads: Option<usize>,
-    /// Camera rays per pixel (at least 1).
-    #[arg(short = 's', long = "samples", visible_alias = "spp", default_value_t = 1)]
-    samples: u32,
-    /// Shadow rays per area light (at least 1).
-    #[arg(short = 'l', long = "light-samples", default_value_t = 1)]
-    light_samples: u32,
-    /// Maximum ray depth.
-    #[arg(short = 'm', long = "max-depth", default_value_t = 1)]
-    max_depth: u32,
+    /// Camera rays per pixel, at least 1 [default: 1, as CS184; the built-in Cornell box: 128].
+    #[arg(short = 's', long = "samples", visible_alias = "spp")]
+    samples: Option<u32>,
+    /// Shadow rays per area light [default: 1; the built-in Cornell box: 2].
+    #[arg(short = 'l', long = "light-samples")]
+    light_samples: Option<u32>,
+    /// Maximum ray depth [default: 1; the built-in Cornell box: 5].
+    #[arg(short = 'm', long = "max-depth")]
+    max_depth: Option<u32>,
     /// Image size in pixels.
     #[arg(short = 'r', long = "resolution", num_args = 2, value_names = ["WIDTH", "HEIGHT"], default_values_t = [480, 360])]
     resolution: Vec<usize>,
@@ -178,6 +211,12 @@ struct RenderArgs {
     /// What to compute per camera ray.
     #[arg(long, value_enum, default_value_t = IntegratorArg::Global)]
     integrator: IntegratorArg,
+    /// With --integrator heatmap: which count the image shows.
+    #[arg(long, value_enum, default_value_t = heatmap::ViewArg::Nodes)]
+    heatmap: heatmap::ViewArg,
+    /// With --integrator heatmap: count camera rays, or shadow rays toward the first light.
+    #[arg(long, value_enum, default_value_t = heatmap::RaysArg::Camera)]
+    heatmap_rays: heatmap::RaysArg,
     /// Never terminate paths early by Russian roulette (only -m ends them).
     #[arg(long)]
     no_russian_roulette: bool,
@@ -331,6 +370,8 @@ enum CliError {
     Bench(#[from] bench::BenchError),
     #[error(transparent)]
     Output(#[from] raypack::io::output::OutputError),
+    #[error(transparent)]
+    Rays(#[from] raypack::io::rays::RayFileError),
     #[error("{0}")]
     Usage(String),
 }
@@ -338,7 +379,7 @@ enum CliError {
 fn main() -> ExitCode {
     let mut args: Vec<std::ffi::OsString> = std::env::args_os().collect();
     // CS184 style: `raypack scene.dae -t 8 ...` means `raypack render scene.dae -t 8 ...`.
-    let known = ["render", "info", "bench", "help", "-h", "--help", "-V", "--version"];
+    let known = ["render", "info", "bench", "report", "help", "-h", "--help", "-V", "--version"];
     if args.len() > 1 && !known.iter().any(|k| args[1] == *k) {
         // A scene file (or a flag of `render`) means `render`; any other first word is a
         // mistyped subcommand, not a scene of an unsupported format.
@@ -346,7 +387,7 @@ fn main() -> ExitCode {
         let is_flag = args[1].to_string_lossy().starts_with('-');
         if !is_flag && !first.exists() && raypack::io::SceneFormat::from_path(first).is_none() {
             eprintln!(
-                "raypack: error: unknown command '{}'; the commands are render, info, bench and help \
+                "raypack: error: unknown command '{}'; the commands are render, info, bench, report and help \
                  (`raypack SCENE` renders a .dae, .obj or .ply file; `raypack --help` lists the flags)",
                 args[1].to_string_lossy()
             );
@@ -376,6 +417,7 @@ fn main() -> ExitCode {
         Command::Render(a) => render::cmd_render(a),
         Command::Info(a) => info::cmd_info(a),
         Command::Bench(a) => bench::cmd_bench(a),
+        Command::Report(a) => report::write_report(&a.json, &a.out),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

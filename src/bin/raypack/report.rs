@@ -1,0 +1,335 @@
+//! `raypack report A.json B.json … --out DIR` (and `raypack bench … --report DIR`): a
+//! self-contained benchmark report, `index.html` with the charts as inline SVG (no network,
+//! no JavaScript) and the same charts as PNG files beside it.
+//!
+//! It reads the JSON `raypack bench --json` writes. The fields of schema 2 (machine, raypack
+//! and Embree versions, date, summary) are optional: shown when present, "unknown"
+//! otherwise; the raypack-best / Embree-best ratio is computed from "results".
+//!
+//! Text is laid out with a TrueType font read from the system (DejaVu Sans, Debian's
+//! `fonts-dejavu-core`); without one the report is a clear error.
+
+use crate::CliError;
+use plotters::prelude::*;
+use serde_json::Value;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Where a sans-serif TrueType font is looked for.
+const FONTS: [&str; 3] = [
+    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/TTF/DejaVuSans.ttf",
+    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
+];
+
+/// One result row of a bench JSON.
+struct Row {
+    rays: String,
+    threads: u64,
+    tracer: String,
+    method: String,
+    mrays: f64,
+}
+
+/// One bench JSON.
+struct Input {
+    label: String,
+    json: Value,
+    rows: Vec<Row>,
+}
+
+fn text(v: &Value) -> String {
+    match v {
+        Value::Null => "unknown".into(),
+        Value::String(s) => s.clone(),
+        other => other.to_string(),
+    }
+}
+
+fn read_input(path: &Path) -> Result<Input, CliError> {
+    let bad = |m: String| CliError::Usage(format!("{}: {m}", path.display()));
+    let bytes = std::fs::read(path).map_err(|e| bad(e.to_string()))?;
+    let json: Value = serde_json::from_slice(&bytes).map_err(|e| bad(format!("not bench JSON: {e}")))?;
+    let results = json["results"].as_array().ok_or_else(|| bad("no \"results\" array".into()))?;
+    let mut rows = Vec::new();
+    for (i, r) in results.iter().enumerate() {
+        let field = |k: &str| r[k].as_str().map(str::to_owned).ok_or_else(|| bad(format!("results[{i}]: no \"{k}\"")));
+        rows.push(Row {
+            rays: field("rays")?,
+            tracer: field("tracer")?,
+            method: field("method")?,
+            threads: r["threads"].as_u64().ok_or_else(|| bad(format!("results[{i}]: no \"threads\"")))?,
+            mrays: r["mrays_per_s"].as_f64().ok_or_else(|| bad(format!("results[{i}]: no \"mrays_per_s\"")))?,
+        });
+    }
+    let scene = json["scene"].as_str().map_or("unknown scene".into(), |s| {
+        Path::new(s).file_name().map_or(s.to_owned(), |n| n.to_string_lossy().into_owned())
+    });
+    let commit = text(&json["raypack"]["commit"]);
+    let label = format!("{scene} ({commit}, {})", path.file_stem().map_or("".into(), |s| s.to_string_lossy()));
+    Ok(Input { label, json, rows })
+}
+
+fn palette(i: usize) -> RGBColor {
+    const C: [RGBColor; 8] = [
+        RGBColor(31, 119, 180),
+        RGBColor(255, 127, 14),
+        RGBColor(44, 160, 44),
+        RGBColor(214, 39, 40),
+        RGBColor(148, 103, 189),
+        RGBColor(140, 86, 75),
+        RGBColor(227, 119, 194),
+        RGBColor(127, 127, 127),
+    ];
+    C[i % C.len()]
+}
+
+/// A grouped bar chart: `groups` along x, one bar per series in each.
+struct Bars {
+    title: String,
+    y_label: String,
+    groups: Vec<String>,
+    /// (series name, value per group)
+    series: Vec<(String, Vec<Option<f64>>)>,
+    /// A horizontal reference line (the ratio chart's 1.0).
+    line: Option<f64>,
+}
+
+fn draw<DB: DrawingBackend>(root: DrawingArea<DB, plotters::coord::Shift>, b: &Bars) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let e = |x: &dyn std::fmt::Display| x.to_string();
+    root.fill(&WHITE).map_err(|x| e(&x))?;
+    let max = b.series.iter().flat_map(|s| s.1.iter().flatten()).copied().fold(b.line.unwrap_or(0.0), f64::max);
+    let n = b.groups.len().max(1) as f64;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(&b.title, ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(10)
+        .y_label_area_size(60)
+        .build_cartesian_2d(-0.5..n - 0.5, 0.0..max * 1.15 + 1e-9)
+        .map_err(|x| e(&x))?;
+    chart.configure_mesh().disable_x_mesh().disable_x_axis().y_desc(&b.y_label).draw().map_err(|x| e(&x))?;
+    let k = b.series.len().max(1) as f64;
+    let w = 0.8 / k;
+    for (si, (name, values)) in b.series.iter().enumerate() {
+        let c = palette(si);
+        chart
+            .draw_series(values.iter().enumerate().filter_map(|(gi, v)| {
+                let x0 = gi as f64 - 0.4 + si as f64 * w;
+                v.map(|v| Rectangle::new([(x0, 0.0), (x0 + w * 0.9, v)], c.filled()))
+            }))
+            .map_err(|x| e(&x))?
+            .label(name.as_str())
+            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 10, y + 5)], c.filled()));
+    }
+    if let Some(l) = b.line {
+        chart.draw_series(LineSeries::new([(-0.5, l), (n - 0.5, l)], BLACK.stroke_width(2))).map_err(|x| e(&x))?;
+    }
+    chart
+        .draw_series(
+            b.groups
+                .iter()
+                .enumerate()
+                .map(|(gi, g)| Text::new(g.clone(), (gi as f64 - 0.1, max * 1.1), ("sans-serif", 14))),
+        )
+        .map_err(|x| e(&x))?;
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 11))
+        .draw()
+        .map_err(|x| e(&x))?;
+    root.present().map_err(|x| e(&x))
+}
+
+/// The charts of `inputs`: Mrays/s per input and thread count, the ratio, the builds.
+fn charts(inputs: &[Input]) -> Vec<Bars> {
+    let mut out = Vec::new();
+    for inp in inputs {
+        let mut threads: Vec<u64> = inp.rows.iter().map(|r| r.threads).collect();
+        threads.sort();
+        threads.dedup();
+        for t in threads {
+            let rows: Vec<&Row> = inp.rows.iter().filter(|r| r.threads == t).collect();
+            let mut groups: Vec<String> = Vec::new();
+            let mut names: Vec<String> = Vec::new();
+            for r in &rows {
+                if !groups.contains(&r.rays) {
+                    groups.push(r.rays.clone());
+                }
+                let n = format!("{}: {}", r.tracer, r.method);
+                if !names.contains(&n) {
+                    names.push(n);
+                }
+            }
+            let series = names
+                .iter()
+                .map(|n| {
+                    let v = groups
+                        .iter()
+                        .map(|g| {
+                            rows.iter()
+                                .find(|r| &r.rays == g && &format!("{}: {}", r.tracer, r.method) == n)
+                                .map(|r| r.mrays)
+                        })
+                        .collect();
+                    (n.clone(), v)
+                })
+                .collect();
+            let isa = text(&inp.json["raypack"]["isa"]);
+            out.push(Bars {
+                title: format!("{} — {t} thread(s), ISA {isa}", inp.label),
+                y_label: "Mrays/s".into(),
+                groups,
+                series,
+                line: None,
+            });
+        }
+    }
+    // The ratio raypack-best / Embree-best per ray set and thread count, one series per input.
+    let mut groups: Vec<String> = Vec::new();
+    for inp in inputs {
+        for r in &inp.rows {
+            let g = format!("{} {}t", r.rays, r.threads);
+            if !groups.contains(&g) {
+                groups.push(g);
+            }
+        }
+    }
+    let best = |inp: &Input, g: &str, tracer: &str| {
+        inp.rows
+            .iter()
+            .filter(|r| format!("{} {}t", r.rays, r.threads) == g && (r.tracer == "embree") == (tracer == "embree"))
+            .map(|r| r.mrays)
+            .fold(None, |a: Option<f64>, x| Some(a.map_or(x, |a| a.max(x))))
+    };
+    let series: Vec<(String, Vec<Option<f64>>)> = inputs
+        .iter()
+        .map(|inp| {
+            let v = groups
+                .iter()
+                .map(|g| match (best(inp, g, "raypack"), best(inp, g, "embree")) {
+                    (Some(a), Some(b)) if b > 0.0 => Some(a / b),
+                    _ => None,
+                })
+                .collect();
+            (inp.label.clone(), v)
+        })
+        .collect();
+    out.push(Bars {
+        title: "best raypack / best Embree (1.0: as fast)".into(),
+        y_label: "ratio".into(),
+        groups,
+        series,
+        line: Some(1.0),
+    });
+    // Build time and bytes per triangle.
+    for (what, key) in [("build time (s)", "seconds"), ("bytes per triangle", "bytes_per_triangle")] {
+        let mut groups: Vec<String> = Vec::new();
+        for inp in inputs {
+            if let Some(b) = inp.json["build"].as_object() {
+                for k in b.keys() {
+                    if !groups.contains(k) {
+                        groups.push(k.clone());
+                    }
+                }
+            }
+        }
+        let series = inputs
+            .iter()
+            .map(|inp| (inp.label.clone(), groups.iter().map(|g| inp.json["build"][g][key].as_f64()).collect()))
+            .collect();
+        out.push(Bars { title: what.into(), y_label: what.into(), groups, series, line: None });
+    }
+    out
+}
+
+fn register_font() -> Result<(), CliError> {
+    let bytes = FONTS.iter().find_map(|p| std::fs::read(p).ok()).ok_or_else(|| {
+        CliError::Usage(format!(
+            "the report needs a TrueType font to lay out its text: none of {FONTS:?} exists (Debian: apt-get install fonts-dejavu-core)"
+        ))
+    })?;
+    let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
+    plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
+        .map_err(|_| CliError::Usage("the system font could not be read".into()))
+}
+
+/// Writes the report of the bench JSON files `inputs` into `out`.
+pub(crate) fn write_report(inputs: &[PathBuf], out: &Path) -> Result<(), CliError> {
+    if inputs.is_empty() {
+        return Err(CliError::Usage("raypack report: give at least one bench JSON file".into()));
+    }
+    let inputs: Vec<Input> = inputs.iter().map(|p| read_input(p)).collect::<Result<_, _>>()?;
+    register_font()?;
+    std::fs::create_dir_all(out).map_err(|e| CliError::Usage(format!("{}: {e}", out.display())))?;
+    let mut html = String::from(
+        "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>raypack benchmark report</title>\
+         <style>body{font-family:sans-serif;max-width:1000px;margin:auto}td,th{padding:2px 8px;text-align:left}</style>\
+         </head><body>\n<h1>raypack benchmark report</h1>\n",
+    );
+    for inp in &inputs {
+        let j = &inp.json;
+        let m = &j["machine"];
+        let flags = m["cpu_flags"].as_array().map(|a| a.iter().map(text).collect::<Vec<_>>().join(" "));
+        let _ = writeln!(
+            html,
+            "<h2>{}</h2><table>\
+             <tr><th>scene</th><td>{}</td></tr><tr><th>triangles</th><td>{}</td></tr>\
+             <tr><th>CPU</th><td>{}</td></tr><tr><th>ISA flags</th><td>{}</td></tr>\
+             <tr><th>threads</th><td>{}</td></tr><tr><th>memory (bytes)</th><td>{}</td></tr>\
+             <tr><th>raypack</th><td>version {}, commit {}, ISA {}</td></tr>\
+             <tr><th>Embree</th><td>{}</td></tr><tr><th>date</th><td>{}</td></tr>\
+             <tr><th>ray sets</th><td>{}</td></tr><tr><th>notes</th><td>{}</td></tr></table>",
+            esc(&inp.label),
+            esc(&text(&j["scene"])),
+            text(&j["triangles"]),
+            esc(&text(&m["cpu"])),
+            esc(&flags.unwrap_or_else(|| "unknown".into())),
+            text(&m["logical_cpus"]),
+            text(&m["memory_bytes"]),
+            esc(&text(&j["raypack"]["version"])),
+            esc(&text(&j["raypack"]["commit"])),
+            esc(&text(&j["raypack"]["isa"])),
+            esc(&if j["embree"].is_object() {
+                format!("{} (ISA {})", text(&j["embree"]["version"]), text(&j["embree"]["isa"]))
+            } else {
+                "unknown".into()
+            }),
+            esc(&text(&j["date"])),
+            esc(&ray_sets(&inp.rows, &j["resolution"])),
+            esc(&j["notes"].as_array().map_or("".into(), |a| a.iter().map(text).collect::<Vec<_>>().join("; "))),
+        );
+    }
+    for (i, chart) in charts(&inputs).iter().enumerate() {
+        let mut svg = String::new();
+        draw(SVGBackend::with_string(&mut svg, (960, 420)).into_drawing_area(), chart).map_err(CliError::Usage)?;
+        let png = out.join(format!("chart{i}.png"));
+        draw(BitMapBackend::new(&png, (960, 420)).into_drawing_area(), chart)
+            .map_err(|m| CliError::Usage(format!("{}: {m}", png.display())))?;
+        let _ = write!(html, "<h3>{}</h3>\n{svg}\n<p><a href=\"chart{i}.png\">PNG</a></p>\n", esc(&chart.title));
+    }
+    html.push_str("</body></html>\n");
+    raypack::io::output::write_file(&out.join("index.html"), html.as_bytes())?;
+    Ok(())
+}
+
+fn ray_sets(rows: &[Row], resolution: &Value) -> String {
+    let mut sets: Vec<&str> = rows.iter().map(|r| r.rays.as_str()).collect();
+    sets.dedup();
+    let mut seen = Vec::new();
+    for s in sets {
+        if !seen.contains(&s) {
+            seen.push(s);
+        }
+    }
+    format!("{} (primary resolution {})", seen.join(", "), text(resolution))
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}

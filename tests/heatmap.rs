@@ -1,0 +1,98 @@
+//! The traversal-cost heatmap counts the real kernel's work: each pixel's counts equal the
+//! counters of the single-ray BVH8 kernels for the same ray traced directly, for camera and
+//! shadow rays, on the built-in Cornell box and on third-party scenes (CBbunny, building).
+
+mod common;
+
+use raypack::bvh::TraversalCounts;
+use raypack::render::camera::CameraRays;
+use raypack::render::heatmap::{self, HeatmapRays, HeatmapView};
+use raypack::{BuildOptions, Scene};
+
+fn check(scene: &Scene, name: &str, width: usize, height: usize) {
+    let camera = scene.camera_or_framing(width as f32 / height as f32);
+    let rays = CameraRays::new(&camera);
+    for which in [HeatmapRays::Camera, HeatmapRays::Shadow] {
+        let counts = heatmap::trace_counts(scene, &camera, width, height, which).unwrap();
+        assert_eq!((counts.nodes.len(), counts.tests.len()), (width * height, width * height));
+        let light = scene.lights[0];
+        let mut total = TraversalCounts::default();
+        let mut hits = 0;
+        for y in 0..height {
+            for x in 0..width {
+                let ray = heatmap::pixel_ray(&rays, x, y, width, height);
+                let mut c = TraversalCounts::default();
+                match which {
+                    HeatmapRays::Camera => {
+                        // The same hit as the uncounted query: the counted kernel is the one
+                        // that traces.
+                        let hit = scene.intersect1_counted(&ray, &mut c);
+                        assert_eq!(hit, scene.intersect1(&ray));
+                        // A hit was found by testing a block.
+                        assert!(!hit.is_hit() || c.blocks >= 1, "{name} pixel ({x}, {y}): {c:?}");
+                        hits += hit.is_hit() as usize;
+                    }
+                    HeatmapRays::Shadow => {
+                        if let Some(s) = heatmap::shadow_ray(scene, &light, &ray) {
+                            let occ = scene.occluded1_counted(&s, &mut c);
+                            assert_eq!(occ, scene.occluded1(&s));
+                            assert!(!occ || c.blocks >= 1, "{name} pixel ({x}, {y}): {c:?}");
+                            hits += 1;
+                        }
+                    }
+                }
+                let i = y * width + x;
+                assert_eq!(
+                    (counts.nodes[i] as u64, counts.tests[i] as u64),
+                    (c.nodes, c.blocks),
+                    "{name} {which:?} pixel ({x}, {y})"
+                );
+                total += c;
+            }
+        }
+        // The scene is in view (most camera rays hit, so most pixels cast a shadow ray), and
+        // the rays did work.
+        assert!(hits > width * height / 10, "{name} {which:?}: {hits} rays");
+        assert!(total.nodes > 0 && total.blocks > 0, "{name} {which:?}: {total:?}");
+        for view in [HeatmapView::Nodes, HeatmapView::Tests, HeatmapView::Both] {
+            let img = counts.image(view);
+            assert_eq!(img.rgb.len(), img.width * img.height * 3);
+            assert!(img.height > height);
+            // The pixel with the most work is drawn in viridis' top colour.
+            let counts_of = if view == HeatmapView::Tests { &counts.tests } else { &counts.nodes };
+            let max = *counts_of.iter().max().unwrap();
+            let at = counts_of.iter().position(|&c| c == max).unwrap();
+            assert_eq!(&img.rgb[(at / width * img.width + at % width) * 3..][..3], &heatmap::colour(max, max));
+        }
+    }
+}
+
+#[test]
+fn heatmap_counts_equal_kernel_counters_on_the_cornell_box() {
+    let (scene, _) = raypack::io::default_scene().commit(&BuildOptions::default());
+    check(&scene, "cornell", 96, 72);
+}
+
+#[test]
+fn heatmap_counts_equal_kernel_counters_on_third_party_scenes() {
+    let Some(dir) = common::scenes_dir("heatmap_counts_equal_kernel_counters_on_third_party_scenes") else {
+        return;
+    };
+    for rel in ["cs184/sky/CBbunny.dae", "cs184/keenan/building.dae"] {
+        let builder = raypack::io::load_scene(&dir.join(rel)).unwrap().builder;
+        let (scene, _) = builder.commit(&BuildOptions::default());
+        check(&scene, rel, 64, 48);
+    }
+}
+
+#[test]
+fn shadow_heatmap_needs_a_light() {
+    let mesh = raypack::generate::grid(4, 4);
+    let scene = common::scene_of(&[&mesh], &[], &BuildOptions::default());
+    let camera = scene.camera_or_framing(1.0);
+    assert_eq!(
+        heatmap::trace_counts(&scene, &camera, 8, 8, HeatmapRays::Shadow).unwrap_err(),
+        heatmap::HeatmapError::NoLight
+    );
+    assert!(heatmap::trace_counts(&scene, &camera, 8, 8, HeatmapRays::Camera).is_ok());
+}
