@@ -85,9 +85,9 @@ fn clamped_values_are_warned_about() {
     assert_eq!(code, 0, "{err}");
     assert!(err.contains("warning: -s 0: rendering 1 sample per pixel"), "{err}");
     assert!(err.contains("warning: -l 0: taking 1 shadow ray"), "{err}");
-    let (code, err, _) = raypack(&["render", "-r", "16", "12", "-s", "1", "-q", "-o", s(&b)]);
+    let (code, err, _) = raypack(&["render", "-r", "16", "12", "-s", "1", "-l", "1", "-q", "-o", s(&b)]);
     assert_eq!((code, err.as_str()), (0, ""));
-    assert_eq!(pixels(&a), pixels(&b), "-s 0 renders as -s 1");
+    assert_eq!(pixels(&a), pixels(&b), "-s 0 -l 0 renders as -s 1 -l 1");
     let (code, err, _) = raypack(&["render", "-r", "16", "12", "-s", "4", "-a", "64", "0.05", "-q", "-o", s(&a)]);
     assert_eq!(code, 0, "{err}");
     assert!(err.contains("-a 64: the batch is larger than the 4 samples per pixel"), "{err}");
