@@ -75,6 +75,28 @@ fn white_furnace_light_sampling_is_exact_everywhere() {
 }
 
 #[test]
+fn clamping_scales_samples_above_the_limit_and_leaves_the_rest() {
+    // In the diffuse white furnace every sample is exactly ENV (light sampling), so a limit
+    // below ENV turns every pixel into the limit and counts every sample, and a limit above
+    // ENV changes nothing.
+    let (scene, camera) = furnace(Material::diffuse(Vec3::ONE));
+    let mut s = settings(16, 16, IntegratorKind::Global);
+    s.samples_per_pixel = 4;
+    s.max_depth = 3;
+    let free = render(&scene, &camera, &s);
+    s.max_sample_value = Some(0.5 * ENV);
+    let low = render(&scene, &camera, &s);
+    assert_eq!(low.stats.clamped_samples, low.stats.samples);
+    for (i, p) in low.film.pixels.iter().enumerate() {
+        assert!((*p - Vec3::splat(0.5 * ENV)).abs().max_element() <= 0.01 * ENV, "pixel {i} is {p}, not {}", 0.5 * ENV);
+    }
+    s.max_sample_value = Some(1.5 * ENV);
+    let high = render(&scene, &camera, &s);
+    assert_eq!(high.stats.clamped_samples, 0);
+    assert_eq!(high.film.pixels, free.film.pixels);
+}
+
+#[test]
 fn white_furnace_hemisphere_sampling_is_unbiased() {
     let (scene, camera) = furnace(Material::diffuse(Vec3::ONE));
     let mut s = settings(32, 32, IntegratorKind::Global);

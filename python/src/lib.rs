@@ -551,6 +551,7 @@ fn render<'py>(
         brute_force: false,
         russian_roulette,
         stream_order: None,
+        max_sample_value: None,
     };
     let loaded;
     let bound;

@@ -72,6 +72,11 @@ pub struct RenderSettings {
     /// fastest for the scene's kernels ([`StreamOrder::default_for`]). The image is the same
     /// whatever the order.
     pub stream_order: Option<StreamOrder>,
+    /// Largest value a camera sample's radiance may have in any RGB component (pbrt-v4's
+    /// film `maxcomponentvalue`): a sample above it is scaled down so that its largest
+    /// component equals it. This trades bias (darker caustics) for the rare paths that would
+    /// otherwise show as fireflies. `None` keeps every sample as it is (CS184, unbiased).
+    pub max_sample_value: Option<f32>,
 }
 
 impl Default for RenderSettings {
@@ -89,6 +94,7 @@ impl Default for RenderSettings {
             brute_force: false,
             russian_roulette: true,
             stream_order: None,
+            max_sample_value: None,
         }
     }
 }
@@ -104,6 +110,8 @@ pub struct RenderStats {
     pub samples: u64,
     /// Samples whose radiance was NaN or infinite (counted as black).
     pub invalid_samples: u64,
+    /// Samples scaled down to [`RenderSettings::max_sample_value`].
+    pub clamped_samples: u64,
     /// Wall-clock time of the render.
     pub time: Duration,
     /// Thread time of each phase (summed over threads).
@@ -158,6 +166,7 @@ pub fn render(
     for (&(tx, ty), tile) in tiles.iter().zip(rendered) {
         log.merge(tile.log);
         stats.invalid_samples += tile.invalid_samples;
+        stats.clamped_samples += tile.clamped_samples;
         stats.phases += tile.phases;
         let (x0, y0) = (tx * TILE, ty * TILE);
         let tw = TILE.min(w - x0);
@@ -178,6 +187,7 @@ struct TileResult {
     pixels: Vec<PixelEstimate>,
     log: RayLog,
     invalid_samples: u64,
+    clamped_samples: u64,
     phases: PhaseTimes,
 }
 
@@ -218,6 +228,7 @@ fn render_tile(
     let mut log = RayLog::default();
     let mut phases = PhaseTimes::default();
     let mut invalid = 0u64;
+    let mut clamped = 0u64;
     // Every pixel still sampling has taken `taken` samples: all start together and a batch
     // adds the same number to each.
     let mut taken = 0u32;
@@ -251,6 +262,13 @@ fn render_tile(
                     invalid += 1;
                     l = Vec3::ZERO;
                 }
+                if let Some(max) = settings.max_sample_value {
+                    let largest = l.max_element();
+                    if largest > max {
+                        l *= max / largest;
+                        clamped += 1;
+                    }
+                }
                 pixels[i as usize].add(l);
             }
             taken = pass_end;
@@ -262,5 +280,5 @@ fn render_tile(
         }
         phases.film += t.elapsed();
     }
-    TileResult { pixels, log, invalid_samples: invalid, phases }
+    TileResult { pixels, log, invalid_samples: invalid, clamped_samples: clamped, phases }
 }

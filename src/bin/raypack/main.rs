@@ -220,6 +220,11 @@ struct RenderArgs {
     /// Never terminate paths early by Russian roulette (only -m ends them).
     #[arg(long)]
     no_russian_roulette: bool,
+    /// Scale down any camera sample whose radiance exceeds V in an RGB component (pbrt-v4's
+    /// maxcomponentvalue): removes fireflies at the cost of some bias. Default: 10 for the
+    /// built-in box, none (`inf`) for a scene file.
+    #[arg(long, value_name = "V")]
+    clamp: Option<f32>,
     /// Seed of all random numbers.
     #[arg(long, default_value_t = 0)]
     seed: u64,
