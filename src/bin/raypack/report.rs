@@ -29,6 +29,8 @@ struct Row {
     tracer: String,
     method: String,
     mrays: f64,
+    /// Slowest and fastest run (schema 2), when the JSON has them.
+    range: Option<(f64, f64)>,
 }
 
 /// One bench JSON.
@@ -60,6 +62,7 @@ fn read_input(path: &Path) -> Result<Input, CliError> {
             method: field("method")?,
             threads: r["threads"].as_u64().ok_or_else(|| bad(format!("results[{i}]: no \"threads\"")))?,
             mrays: r["mrays_per_s"].as_f64().ok_or_else(|| bad(format!("results[{i}]: no \"mrays_per_s\"")))?,
+            range: r["mrays_per_s_min"].as_f64().zip(r["mrays_per_s_max"].as_f64()),
         });
     }
     let scene = json["scene"].as_str().map_or("unknown scene".into(), |s| {
@@ -70,18 +73,33 @@ fn read_input(path: &Path) -> Result<Input, CliError> {
     Ok(Input { label, json, rows })
 }
 
-fn palette(i: usize) -> RGBColor {
-    const C: [RGBColor; 8] = [
-        RGBColor(31, 119, 180),
-        RGBColor(255, 127, 14),
-        RGBColor(44, 160, 44),
-        RGBColor(214, 39, 40),
-        RGBColor(148, 103, 189),
-        RGBColor(140, 86, 75),
-        RGBColor(227, 119, 194),
-        RGBColor(127, 127, 127),
-    ];
-    C[i % C.len()]
+/// The colour of series `i` of `n` in `family`: raypack's methods in blues, Embree's in
+/// oranges, other series (one per input) from a categorical palette.
+fn colour(family: Family, i: usize, n: usize) -> RGBColor {
+    let c = match family {
+        // Shades from the middle of the sequential maps: light enough to tell apart, dark
+        // enough to see on white.
+        Family::Raypack => colorous::BLUES.eval_rational(i + n / 2 + 2, n + n / 2 + 3),
+        Family::Embree => colorous::ORANGES.eval_rational(i + n / 2 + 2, n + n / 2 + 3),
+        Family::Input => colorous::TABLEAU10[i % colorous::TABLEAU10.len()],
+    };
+    RGBColor(c.r, c.g, c.b)
+}
+
+#[derive(Clone, Copy, PartialEq)]
+enum Family {
+    Raypack,
+    Embree,
+    Input,
+}
+
+/// One bar per group: its name, colour family, and per group the value and the spread
+/// (slowest and fastest run) drawn as a whisker.
+struct Series {
+    name: String,
+    family: Family,
+    values: Vec<Option<f64>>,
+    ranges: Vec<Option<(f64, f64)>>,
 }
 
 /// A grouped bar chart: `groups` along x, one bar per series in each.
@@ -89,10 +107,19 @@ struct Bars {
     title: String,
     y_label: String,
     groups: Vec<String>,
-    /// (series name, value per group)
-    series: Vec<(String, Vec<Option<f64>>)>,
+    series: Vec<Series>,
     /// A horizontal reference line (the ratio chart's 1.0).
     line: Option<f64>,
+}
+
+/// Width of the legend column beside the plot, in pixels.
+const LEGEND_WIDTH: u32 = 320;
+/// Height of one legend entry, in pixels.
+const LEGEND_ROW: u32 = 15;
+
+/// The chart's size in pixels: 960 wide plus the legend column, tall enough for the legend.
+fn chart_size(b: &Bars) -> (u32, u32) {
+    (960 + LEGEND_WIDTH, 420.max(60 + LEGEND_ROW * b.series.len() as u32))
 }
 
 fn draw<DB: DrawingBackend>(root: DrawingArea<DB, plotters::coord::Shift>, b: &Bars) -> Result<(), String>
@@ -101,9 +128,16 @@ where
 {
     let e = |x: &dyn std::fmt::Display| x.to_string();
     root.fill(&WHITE).map_err(|x| e(&x))?;
-    let max = b.series.iter().flat_map(|s| s.1.iter().flatten()).copied().fold(b.line.unwrap_or(0.0), f64::max);
+    let (w, _) = root.dim_in_pixel();
+    let (plot, legend) = root.split_horizontally(w - LEGEND_WIDTH);
+    let top = b.series.iter().flat_map(|s| s.values.iter().zip(&s.ranges)).filter_map(|(v, r)| match (v, r) {
+        (_, Some((_, hi))) => Some(*hi),
+        (Some(v), None) => Some(*v),
+        _ => None,
+    });
+    let max = top.fold(b.line.unwrap_or(0.0), f64::max);
     let n = b.groups.len().max(1) as f64;
-    let mut chart = ChartBuilder::on(&root)
+    let mut chart = ChartBuilder::on(&plot)
         .caption(&b.title, ("sans-serif", 18))
         .margin(10)
         .x_label_area_size(10)
@@ -112,17 +146,29 @@ where
         .map_err(|x| e(&x))?;
     chart.configure_mesh().disable_x_mesh().disable_x_axis().y_desc(&b.y_label).draw().map_err(|x| e(&x))?;
     let k = b.series.len().max(1) as f64;
-    let w = 0.8 / k;
-    for (si, (name, values)) in b.series.iter().enumerate() {
-        let c = palette(si);
+    let bw = 0.8 / k;
+    let count = |f: Family| b.series.iter().filter(|s| s.family == f).count();
+    let mut index = [0usize; 3];
+    let mut colours = Vec::new();
+    for (si, s) in b.series.iter().enumerate() {
+        let i = &mut index[s.family as usize];
+        let c = colour(s.family, *i, count(s.family));
+        *i += 1;
+        colours.push(c);
+        let x0 = |gi: usize| gi as f64 - 0.4 + si as f64 * bw;
         chart
-            .draw_series(values.iter().enumerate().filter_map(|(gi, v)| {
-                let x0 = gi as f64 - 0.4 + si as f64 * w;
-                v.map(|v| Rectangle::new([(x0, 0.0), (x0 + w * 0.9, v)], c.filled()))
+            .draw_series(
+                s.values.iter().enumerate().filter_map(|(gi, v)| {
+                    v.map(|v| Rectangle::new([(x0(gi), 0.0), (x0(gi) + bw * 0.9, v)], c.filled()))
+                }),
+            )
+            .map_err(|x| e(&x))?;
+        chart
+            .draw_series(s.ranges.iter().enumerate().filter_map(|(gi, r)| {
+                let xm = x0(gi) + bw * 0.45;
+                r.map(|(lo, hi)| PathElement::new(vec![(xm, lo), (xm, hi)], BLACK.stroke_width(1)))
             }))
-            .map_err(|x| e(&x))?
-            .label(name.as_str())
-            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 10, y + 5)], c.filled()));
+            .map_err(|x| e(&x))?;
     }
     if let Some(l) = b.line {
         chart.draw_series(LineSeries::new([(-0.5, l), (n - 0.5, l)], BLACK.stroke_width(2))).map_err(|x| e(&x))?;
@@ -135,14 +181,20 @@ where
                 .map(|(gi, g)| Text::new(g.clone(), (gi as f64 - 0.1, max * 1.1), ("sans-serif", 14))),
         )
         .map_err(|x| e(&x))?;
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 11))
-        .draw()
-        .map_err(|x| e(&x))?;
+    // The legend: its own column, so that it never hides a bar.
+    let y0 = 40;
+    for (si, (s, c)) in b.series.iter().zip(&colours).enumerate() {
+        let y = y0 + si as i32 * LEGEND_ROW as i32;
+        legend.draw(&Rectangle::new([(6, y), (18, y + 10)], c.filled())).map_err(|x| e(&x))?;
+        legend.draw(&Text::new(s.name.clone(), (24, y - 1), ("sans-serif", 12))).map_err(|x| e(&x))?;
+    }
+    if b.series.iter().any(|s| s.ranges.iter().any(Option::is_some)) {
+        let y = y0 + b.series.len() as i32 * LEGEND_ROW as i32 + 6;
+        legend.draw(&PathElement::new(vec![(12, y), (12, y + 12)], BLACK.stroke_width(1))).map_err(|x| e(&x))?;
+        legend
+            .draw(&Text::new("slowest to fastest run".to_string(), (24, y), ("sans-serif", 12)))
+            .map_err(|x| e(&x))?;
+    }
     root.present().map_err(|x| e(&x))
 }
 
@@ -169,15 +221,15 @@ fn charts(inputs: &[Input]) -> Vec<Bars> {
             let series = names
                 .iter()
                 .map(|n| {
-                    let v = groups
-                        .iter()
-                        .map(|g| {
-                            rows.iter()
-                                .find(|r| &r.rays == g && &format!("{}: {}", r.tracer, r.method) == n)
-                                .map(|r| r.mrays)
-                        })
-                        .collect();
-                    (n.clone(), v)
+                    let row =
+                        |g: &String| rows.iter().find(|r| &r.rays == g && &format!("{}: {}", r.tracer, r.method) == n);
+                    let family = if n.starts_with("embree") { Family::Embree } else { Family::Raypack };
+                    Series {
+                        name: n.clone(),
+                        family,
+                        values: groups.iter().map(|g| row(g).map(|r| r.mrays)).collect(),
+                        ranges: groups.iter().map(|g| row(g).and_then(|r| r.range)).collect(),
+                    }
                 })
                 .collect();
             let isa = text(&inp.json["raypack"]["isa"]);
@@ -207,17 +259,27 @@ fn charts(inputs: &[Input]) -> Vec<Bars> {
             .map(|r| r.mrays)
             .fold(None, |a: Option<f64>, x| Some(a.map_or(x, |a| a.max(x))))
     };
-    let series: Vec<(String, Vec<Option<f64>>)> = inputs
+    // The spread is the bench summary's (raypack's slowest run over Embree's fastest, and its
+    // fastest over Embree's slowest), when the JSON has one.
+    let spread = |inp: &Input, g: &str| {
+        inp.json["summary"].as_array()?.iter().find_map(|s| {
+            let name = format!("{} {}t", s["rays"].as_str()?, s["threads"].as_u64()?);
+            (name == g).then(|| s["ratio_min"].as_f64().zip(s["ratio_max"].as_f64())).flatten()
+        })
+    };
+    let series: Vec<Series> = inputs
         .iter()
-        .map(|inp| {
-            let v = groups
+        .map(|inp| Series {
+            name: inp.label.clone(),
+            family: Family::Input,
+            values: groups
                 .iter()
                 .map(|g| match (best(inp, g, "raypack"), best(inp, g, "embree")) {
                     (Some(a), Some(b)) if b > 0.0 => Some(a / b),
                     _ => None,
                 })
-                .collect();
-            (inp.label.clone(), v)
+                .collect(),
+            ranges: groups.iter().map(|g| spread(inp, g)).collect(),
         })
         .collect();
     out.push(Bars {
@@ -241,7 +303,12 @@ fn charts(inputs: &[Input]) -> Vec<Bars> {
         }
         let series = inputs
             .iter()
-            .map(|inp| (inp.label.clone(), groups.iter().map(|g| inp.json["build"][g][key].as_f64()).collect()))
+            .map(|inp| Series {
+                name: inp.label.clone(),
+                family: Family::Input,
+                values: groups.iter().map(|g| inp.json["build"][g][key].as_f64()).collect(),
+                ranges: vec![None; groups.len()],
+            })
             .collect();
         out.push(Bars { title: what.into(), y_label: what.into(), groups, series, line: None });
     }
@@ -269,7 +336,7 @@ pub(crate) fn write_report(inputs: &[PathBuf], out: &Path) -> Result<(), CliErro
     std::fs::create_dir_all(out).map_err(|e| CliError::Usage(format!("{}: {e}", out.display())))?;
     let mut html = String::from(
         "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>raypack benchmark report</title>\
-         <style>body{font-family:sans-serif;max-width:1000px;margin:auto}td,th{padding:2px 8px;text-align:left}</style>\
+         <style>body{font-family:sans-serif;max-width:1300px;margin:auto}td,th{padding:2px 8px;text-align:left}</style>\
          </head><body>\n<h1>raypack benchmark report</h1>\n",
     );
     for inp in &inputs {
@@ -307,9 +374,10 @@ pub(crate) fn write_report(inputs: &[PathBuf], out: &Path) -> Result<(), CliErro
     }
     for (i, chart) in charts(&inputs).iter().enumerate() {
         let mut svg = String::new();
-        draw(SVGBackend::with_string(&mut svg, (960, 420)).into_drawing_area(), chart).map_err(CliError::Usage)?;
+        let size = chart_size(chart);
+        draw(SVGBackend::with_string(&mut svg, size).into_drawing_area(), chart).map_err(CliError::Usage)?;
         let png = out.join(format!("chart{i}.png"));
-        draw(BitMapBackend::new(&png, (960, 420)).into_drawing_area(), chart)
+        draw(BitMapBackend::new(&png, size).into_drawing_area(), chart)
             .map_err(|m| CliError::Usage(format!("{}: {m}", png.display())))?;
         let _ = write!(html, "<h3>{}</h3>\n{svg}\n<p><a href=\"chart{i}.png\">PNG</a></p>\n", esc(&chart.title));
     }
