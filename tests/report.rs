@@ -32,6 +32,11 @@ fn report_svgs_parse_and_show_every_result() {
     new["machine"] =
         serde_json::json!({"cpu": "Test CPU 9000", "cpu_flags": ["avx2"], "logical_cpus": 2, "memory_bytes": 1});
     new["raypack"] = serde_json::json!({"version": "0.1.0", "commit": "abc1234", "isa": "avx2"});
+    new["summary"] = serde_json::json!([{"rays": "primary", "threads": 1, "raypack_method": "Scene::intersect_stream",
+        "raypack_mrays_per_s": 20.0, "embree_method": "rtcIntersect8 (medium)", "embree_mrays_per_s": 18.0,
+        "ratio": 1.111, "ratio_min": 0.987, "ratio_max": 1.234}]);
+    new["busy"] = true.into();
+    new["load_average"] = serde_json::json!({"before": [1.9, 1.0, 0.5], "after": [2.1, 1.1, 0.6]});
     let (a, b) = (dir.path().join("old.json"), dir.path().join("new.json"));
     std::fs::write(&a, old.to_string()).unwrap();
     std::fs::write(&b, new.to_string()).unwrap();
@@ -43,6 +48,9 @@ fn report_svgs_parse_and_show_every_result() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let html = std::fs::read_to_string(out.join("index.html")).unwrap();
     assert!(html.contains("Test CPU 9000") && html.contains("abc1234") && html.contains("unknown"));
+    // The summary of the schema-2 JSON is a table, with its spread and the busy warning.
+    assert!(html.contains("<td>1.11</td><td>0.99–1.23</td>"), "{html}");
+    assert!(html.contains("was busy"));
     let mut texts = Vec::new();
     let mut svgs = 0;
     for (start, _) in html.match_indices("<svg") {

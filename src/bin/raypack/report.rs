@@ -371,6 +371,7 @@ pub(crate) fn write_report(inputs: &[PathBuf], out: &Path) -> Result<(), CliErro
             esc(&ray_sets(&inp.rows, &j["resolution"])),
             esc(&j["notes"].as_array().map_or("".into(), |a| a.iter().map(text).collect::<Vec<_>>().join("; "))),
         );
+        html.push_str(&summary_table(j));
     }
     for (i, chart) in charts(&inputs).iter().enumerate() {
         let mut svg = String::new();
@@ -384,6 +385,43 @@ pub(crate) fn write_report(inputs: &[PathBuf], out: &Path) -> Result<(), CliErro
     html.push_str("</body></html>\n");
     raypack::io::output::write_file(&out.join("index.html"), html.as_bytes())?;
     Ok(())
+}
+
+/// The bench summary (schema 2) as a table: per ray set and thread count, the best raypack
+/// method and the best Embree call, their ratio and its spread; with the load line's warning
+/// when the machine was busy. Empty for a JSON without a summary.
+fn summary_table(j: &Value) -> String {
+    let Some(rows) = j["summary"].as_array() else { return String::new() };
+    let mut t = String::from(
+        "<table><tr><th>rays</th><th>threads</th><th>best raypack</th><th>Mrays/s</th>\
+         <th>best Embree</th><th>Mrays/s</th><th>ratio</th><th>ratio min–max</th></tr>\n",
+    );
+    let num = |v: &Value, digits: usize| v.as_f64().map_or("–".into(), |x| format!("{x:.digits$}"));
+    for r in rows {
+        let _ = writeln!(
+            t,
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}–{}</td></tr>",
+            esc(&text(&r["rays"])),
+            text(&r["threads"]),
+            esc(&text(&r["raypack_method"])),
+            num(&r["raypack_mrays_per_s"], 2),
+            esc(&r["embree_method"].as_str().map_or("–".into(), str::to_owned)),
+            num(&r["embree_mrays_per_s"], 2),
+            num(&r["ratio"], 2),
+            num(&r["ratio_min"], 2),
+            num(&r["ratio_max"], 2),
+        );
+    }
+    t.push_str("</table>\n");
+    if j["busy"].as_bool() == Some(true) {
+        let _ = writeln!(
+            t,
+            "<p><b>The machine was busy during this run</b> (load average {} before, {} after): the figures may be off.</p>",
+            text(&j["load_average"]["before"]),
+            text(&j["load_average"]["after"])
+        );
+    }
+    t
 }
 
 fn ray_sets(rows: &[Row], resolution: &Value) -> String {
