@@ -77,6 +77,12 @@ mod embree {
             .define("RAYPACK_EMBREE_MAJOR", found.major.to_string().as_str());
         for dir in &found.include {
             cc.include(dir);
+            // The shim's struct layouts follow the headers (Embree 4's `rtcore_config.h` adds
+            // fields to `RTCHit` with instance arrays): recompile it when they change.
+            let headers = dir.join(format!("embree{}", found.major));
+            if headers.is_dir() {
+                println!("cargo:rerun-if-changed={}", headers.display());
+            }
         }
         cc.compile("raypack_embree_shim");
     }
