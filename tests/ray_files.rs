@@ -110,6 +110,11 @@ fn numpy_layout_is_read_and_bad_files_are_errors() {
     let sums = checksums(&out);
     assert_eq!(sums[0].1, 2);
     assert!((sums[0].2 - 2.0 * 10.2).abs() < 0.02, "{sums:?}");
+    // The summary's header names the file's rays, not the built-in sets it did not trace.
+    let (ok, text, err) =
+        raypack(&["bench", scene.to_str().unwrap(), "--runs", "1", "-t", "1", "--rays", good.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    assert!(text.contains("2 rays from the --rays file") && !text.contains("primary rays"), "{text}");
 
     let bad = dir.join("bad.rays");
     std::fs::write(&bad, [0u8; 40]).unwrap();

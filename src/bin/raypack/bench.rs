@@ -478,6 +478,18 @@ impl BenchReport {
         })
     }
 
+    /// What the rays were: the built-in sets, or the `--rays` file's (whose rows are the set
+    /// `file`).
+    fn ray_sets(&self) -> String {
+        match self.rows.iter().find(|r| r.rays == "file") {
+            Some(r) => format!("{} rays from the --rays file, traced as closest-hit rays", r.ray_count),
+            None => format!(
+                "primary rays {}x{} in 4x4 tiles, diffuse and shadow rays from their hits",
+                self.resolution.0, self.resolution.1
+            ),
+        }
+    }
+
     /// The report as text: the scene and ray sets, (with `verbose`) the build figures and
     /// every method's row, then the header line and the summary table.
     pub fn text(&self, verbose: bool) -> String {
@@ -486,8 +498,11 @@ impl BenchReport {
         if !verbose {
             let _ = writeln!(
                 s,
-                "scene {} ({} triangles); primary rays {}x{}, diffuse and shadow rays from their hits; median of {} runs",
-                self.scene, self.triangles, self.resolution.0, self.resolution.1, self.runs
+                "scene {} ({} triangles); {}; median of {} runs",
+                self.scene,
+                self.triangles,
+                self.ray_sets(),
+                self.runs
             );
         } else {
             s.push('\n');
@@ -540,8 +555,9 @@ impl BenchReport {
         let _ = writeln!(s, "scene      {} ({} triangles)", self.scene, self.triangles);
         let _ = writeln!(
             s,
-            "rays       primary {}x{} in 4x4 tiles, diffuse and shadow from its hits; median of {} runs (each repeats the set to last at least 50 ms)",
-            self.resolution.0, self.resolution.1, self.runs
+            "rays       {}; median of {} runs (each repeats the set to last at least 50 ms)",
+            self.ray_sets(),
+            self.runs
         );
         for n in &self.notes {
             let _ = writeln!(s, "note       {n}");
