@@ -445,6 +445,24 @@ impl BenchReport {
         out
     }
 
+    /// Why a summary row has no Embree figure although Embree ran on its set: every Embree
+    /// call's hits differed from the reference's by more than the summary allows (edge cases
+    /// of a large mesh can do that). One line per ray set, naming both hit counts.
+    fn left_out(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        let mut seen: Vec<&str> = Vec::new();
+        for r in self.summary().iter().filter(|r| r.embree.is_none()) {
+            let embree = self.rows.iter().find(|e| e.tracer == "embree" && e.rays == r.rays && e.threads == r.threads);
+            let Some(e) = embree.filter(|_| !seen.contains(&r.rays)) else { continue };
+            seen.push(r.rays);
+            out.push(format!(
+                "{}: Embree left out: its hits ({}) differ from raypack's ({}) on more than 1e-5 of the {} rays; --verbose lists its figures",
+                r.rays, e.checksum.hits, r.raypack.checksum.hits, e.ray_count
+            ));
+        }
+        out
+    }
+
     /// The one line that names what the figures depend on outside the scene: the CPU and its
     /// ISA flags, raypack's ISA (and commit), Embree's version and ISA, and the load average
     /// before and after the run.
@@ -539,6 +557,9 @@ impl BenchReport {
                 s,
                 "ratio: best raypack median over best Embree median; min-max: raypack's slowest run over Embree's fastest, and its fastest over Embree's slowest"
             );
+        }
+        for line in self.left_out() {
+            let _ = writeln!(s, "{line}");
         }
         if !verbose {
             let _ = writeln!(s, "(every method's figures: --verbose or --json)");
@@ -849,6 +870,22 @@ mod tests {
         let text = report.text(false);
         assert!(text.contains("machine: ") && text.contains(" 2.00x  1.50-2.33x"), "{text}");
         assert!(!text.contains("wrong"));
+        // (The 2-thread row has no Embree figure because Embree did not run there.)
+        assert!(!text.contains("left out"), "{text}");
+
+        // Embree's calls all differ from the reference: the summary says so instead of a bare dash.
+        for r in report.rows.iter_mut().filter(|r| r.tracer == "embree") {
+            r.checksum_differs = true;
+            r.checksum.hits = 7;
+        }
+        let text = report.text(false);
+        assert!(
+            text.contains(
+                "primary: Embree left out: its hits (7) differ from raypack's (0) on more than 1e-5 of the 10 rays"
+            ),
+            "{text}"
+        );
+        assert_eq!(text.matches("left out").count(), 1, "{text}");
     }
 
     #[test]
