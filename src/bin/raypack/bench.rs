@@ -65,6 +65,8 @@ pub struct BenchSettings {
     pub methods: Vec<String>,
     /// The ray sets to time; `None`: [`raysets::bench_sets`] at `width × height`.
     pub ray_sets: Option<Vec<raysets::RaySet>>,
+    /// Builds of each of Embree's structures (the median is reported).
+    pub build_runs: usize,
 }
 
 impl Default for BenchSettings {
@@ -73,6 +75,7 @@ impl Default for BenchSettings {
             width: 1024,
             height: 768,
             runs: 5,
+            build_runs: 1,
             against_embree: false,
             threads: vec![1, 0],
             seed: 1,
@@ -90,10 +93,30 @@ pub struct BuildFigures {
     pub tracer: &'static str,
     /// What was built, e.g. `bvh2 medium` or `medium`.
     pub quality: String,
-    /// Wall-clock build time on all threads.
+    /// Wall-clock build time on all threads, the median of `runs` builds.
     pub seconds: f64,
+    /// The fastest and the slowest of the builds.
+    pub seconds_range: (f64, f64),
+    /// Builds timed.
+    pub runs: usize,
     /// Bytes of the acceleration structure.
     pub bytes: u64,
+}
+
+impl BuildFigures {
+    /// The figures of builds that took `times` (at least one).
+    pub fn from_times(tracer: &'static str, quality: String, times: &[Duration], bytes: u64) -> Self {
+        let secs: Vec<f64> = times.iter().map(Duration::as_secs_f64).collect();
+        let (lo, hi) = secs.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &t| (lo.min(t), hi.max(t)));
+        BuildFigures {
+            tracer,
+            quality,
+            seconds: median(times.to_vec()).as_secs_f64(),
+            seconds_range: (lo, hi),
+            runs: times.len(),
+            bytes,
+        }
+    }
 }
 
 /// One row of results.
@@ -287,13 +310,13 @@ pub fn run_bench(
         for q in [EmbreeQuality::Medium, EmbreeQuality::High] {
             log(&format!("building Embree BVH ({})", q.name()));
             let options = raypack::embree::EmbreeOptions { quality: q, max_isa: settings.isa, ..Default::default() };
-            let e = EmbreeScene::with_options(scene, options)?;
-            report.build.push(BuildFigures {
-                tracer: "embree",
-                quality: q.name().to_string(),
-                seconds: e.build_time().as_secs_f64(),
-                bytes: e.bvh_bytes(),
-            });
+            let mut e = EmbreeScene::with_options(scene, options)?;
+            let mut times = vec![e.build_time()];
+            for _ in 1..settings.build_runs.max(1) {
+                e = EmbreeScene::with_options(scene, options)?;
+                times.push(e.build_time());
+            }
+            report.build.push(BuildFigures::from_times("embree", q.name().to_string(), &times, e.bvh_bytes()));
             v.push(e);
         }
         let e = &v[0];
@@ -445,6 +468,21 @@ impl BenchReport {
         out
     }
 
+    /// The build times in one line: each structure's median over its builds, on all threads.
+    fn build_line(&self) -> Option<String> {
+        let runs = self.build.iter().map(|b| b.runs).max()?;
+        let each: Vec<String> = self
+            .build
+            .iter()
+            .map(|b| {
+                let what = if b.tracer == "raypack" { "raypack".to_string() } else { format!("Embree {}", b.quality) };
+                format!("{what} {:.3} s ({:.3}-{:.3})", b.seconds, b.seconds_range.0, b.seconds_range.1)
+            })
+            .collect();
+        let of = if runs == 1 { "one build each".to_string() } else { format!("median of {runs} builds") };
+        Some(format!("build: {} ({of}, all threads)", each.join(", ")))
+    }
+
     /// Why a summary row has no Embree figure although Embree ran on its set: every Embree
     /// call's hits differed from the reference's by more than the summary allows (edge cases
     /// of a large mesh can do that). One line per ray set, naming both hit counts.
@@ -561,6 +599,9 @@ impl BenchReport {
         for line in self.left_out() {
             let _ = writeln!(s, "{line}");
         }
+        if let Some(line) = self.build_line() {
+            let _ = writeln!(s, "{line}");
+        }
         if !verbose {
             let _ = writeln!(s, "(every method's figures: --verbose or --json)");
         }
@@ -586,10 +627,13 @@ impl BenchReport {
         for b in &self.build {
             let _ = writeln!(
                 s,
-                "build      {:<8} {:<12} {:>9.4} s  {:>12} bytes  {:>7.1} bytes/triangle",
+                "build      {:<8} {:<12} {:>9.4} s ({:.4}-{:.4} s, {} builds)  {:>12} bytes  {:>7.1} bytes/triangle",
                 b.tracer,
                 b.quality,
                 b.seconds,
+                b.seconds_range.0,
+                b.seconds_range.1,
+                b.runs,
                 b.bytes,
                 b.bytes as f64 / tri
             );
@@ -623,7 +667,7 @@ impl BenchReport {
         s
     }
 
-    /// The report as one JSON document (schema 2, `/work/notes/s22/json_contract.md`):
+    /// The report as one JSON document (schema 2):
     /// `{"schema", "date", "scene", "triangles", "resolution", "runs", "notes", "machine",
     /// "raypack", "embree", "load_average", "busy", "build": {...}, "results": [{"rays",
     /// "ray_count", "tracer", "method", "threads", "mrays_per_s", "mrays_per_s_min",
@@ -638,6 +682,9 @@ impl BenchReport {
                     "tracer": b.tracer,
                     "quality": b.quality,
                     "seconds": b.seconds,
+                    "seconds_min": b.seconds_range.0,
+                    "seconds_max": b.seconds_range.1,
+                    "runs": b.runs,
                     "bytes": b.bytes,
                     "bytes_per_triangle": b.bytes as f64 / self.triangles.max(1) as f64,
                 }),
@@ -720,10 +767,14 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     if a.runs == 0 {
         return Err(CliError::Usage("--runs 0: need at least one timed run".into()));
     }
+    if a.build_runs == 0 {
+        return Err(CliError::Usage("--build-runs 0: need at least one build".into()));
+    }
     let mut settings = BenchSettings {
         width,
         height,
         runs: a.runs,
+        build_runs: a.build_runs,
         against_embree: a.against.is_some(),
         isa: a.isa,
         methods: a.methods.clone(),
@@ -744,9 +795,18 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     let (builder, warnings) = load(scene_path, a.max_primitives)?;
     print_warnings(&warnings);
     let quality: BuildQuality = a.quality.into();
-    let t = Instant::now();
     // The binary BVH stays for the reference rows and the checksums they anchor.
     let opts = BuildOptions { quality, watertight: a.watertight, keep_bvh2: true, ..BuildOptions::default() };
+    // The builds beyond the one kept (not with a BVH cache, whose second "build" is a load).
+    let extra_builds = if a.bvh_cache.is_some() { 0 } else { a.build_runs - 1 };
+    let mut build_times = Vec::with_capacity(a.build_runs);
+    for _ in 0..extra_builds {
+        let b = builder.clone();
+        let t = Instant::now();
+        drop(b.commit(&opts));
+        build_times.push(t.elapsed());
+    }
+    let t = Instant::now();
     let (mut scene, report) = match a.bvh_cache.as_deref() {
         None => builder.commit(&opts),
         Some(dir) => {
@@ -760,16 +820,16 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
             (scene, report)
         }
     };
-    let seconds = t.elapsed().as_secs_f64();
+    build_times.push(t.elapsed());
     if report.dropped() > 0 {
         eprintln!("[raypack] warning: {report}");
     }
-    let build = BuildFigures {
-        tracer: "raypack",
-        quality: format!("bvh8 {} {}", format!("{quality:?}").to_lowercase(), scene.triangle_test().name()),
-        seconds,
-        bytes: raypack_accel_bytes(&scene) as u64,
-    };
+    let build = BuildFigures::from_times(
+        "raypack",
+        format!("bvh8 {} {}", format!("{quality:?}").to_lowercase(), scene.triangle_test().name()),
+        &build_times,
+        raypack_accel_bytes(&scene) as u64,
+    );
     settings.ray_sets = crate::rays::ray_sets(&a, &scene, &settings)?;
     let name = scene_path.map_or(crate::BUILT_IN_SCENE.to_string(), |p| p.display().to_string());
     let out = run_bench(&name, &mut scene, build, &settings, &mut |line| eprintln!("[raypack] {line}"))?;
@@ -805,7 +865,7 @@ mod tests {
         let s = uv_sphere(16, 24);
         b.add_mesh(&s.positions, &s.indices, m).unwrap();
         let (scene, _) = b.commit(&BuildOptions::default());
-        let build = BuildFigures { tracer: "raypack", quality: "medium".into(), seconds: 0.0, bytes: 0 };
+        let build = BuildFigures::from_times("raypack", "medium".into(), &[Duration::ZERO], 0);
         let settings = BenchSettings { width: 32, height: 24, runs: 1, threads: vec![1, 2], ..Default::default() };
         let mut scene = scene;
         let report = run_bench("sphere", &mut scene, build, &settings, &mut |_| {}).unwrap();
@@ -841,7 +901,7 @@ mod tests {
     #[test]
     fn summary_pairs_the_fastest_of_each_tracer_and_spans_the_runs() {
         let (mut scene, _) = SceneBuilder::new().commit(&BuildOptions::default());
-        let build = BuildFigures { tracer: "raypack", quality: "medium".into(), seconds: 0.0, bytes: 0 };
+        let build = BuildFigures::from_times("raypack", "medium".into(), &[Duration::ZERO], 0);
         let settings = BenchSettings { width: 4, height: 4, runs: 1, threads: vec![1], ..Default::default() };
         let mut report = run_bench("empty", &mut scene, build, &settings, &mut |_| {}).unwrap();
         let mut wrong = row("primary", 1, "raypack", "wrong", [90.0, 100.0, 110.0]);
@@ -886,6 +946,26 @@ mod tests {
             "{text}"
         );
         assert_eq!(text.matches("left out").count(), 1, "{text}");
+
+        // Build times: the median of the builds, with the fastest and slowest.
+        let ms = |v: &[u64]| v.iter().map(|&m| Duration::from_millis(m)).collect::<Vec<_>>();
+        report.build = vec![
+            BuildFigures::from_times("raypack", "bvh8 medium".into(), &ms(&[300, 100, 200]), 1000),
+            BuildFigures::from_times("embree", "medium".into(), &ms(&[250, 150, 400]), 2000),
+        ];
+        let text = report.text(false);
+        assert!(
+            text.contains(
+                "build: raypack 0.200 s (0.100-0.300), Embree medium 0.250 s (0.150-0.400) (median of 3 builds, all threads)"
+            ),
+            "{text}"
+        );
+        let json = report.json();
+        let b = &json["build"]["embree medium"];
+        assert_eq!(
+            (b["seconds"].as_f64(), b["seconds_min"].as_f64(), b["runs"].as_u64()),
+            (Some(0.25), Some(0.15), Some(3))
+        );
     }
 
     #[test]
@@ -902,7 +982,7 @@ mod tests {
     #[test]
     fn against_embree_without_the_feature_is_a_clear_error() {
         let (mut scene, _) = SceneBuilder::new().commit(&BuildOptions::default());
-        let build = BuildFigures { tracer: "raypack", quality: "medium".into(), seconds: 0.0, bytes: 0 };
+        let build = BuildFigures::from_times("raypack", "medium".into(), &[Duration::ZERO], 0);
         let settings = BenchSettings { against_embree: true, ..Default::default() };
         let err = run_bench("empty", &mut scene, build, &settings, &mut |_| {}).unwrap_err();
         assert!(matches!(err, BenchError::EmbreeNotBuilt));

@@ -90,6 +90,10 @@ struct BenchArgs {
     /// Timed runs per method (the median is reported), after one warm-up run.
     #[arg(long, default_value_t = 5)]
     runs: usize,
+    /// Builds of each acceleration structure (raypack's, Embree's medium and high), on all
+    /// threads; the median is reported, with the fastest and slowest.
+    #[arg(long, value_name = "N", default_value_t = 3)]
+    build_runs: usize,
     /// Thread counts to time at, comma-separated, e.g. `-t 1,2` (0: all cores; default: 1
     /// and all).
     #[arg(short = 't', long = "threads", value_delimiter = ',')]
