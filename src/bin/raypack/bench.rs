@@ -106,13 +106,12 @@ pub struct BuildFigures {
 impl BuildFigures {
     /// The figures of builds that took `times` (at least one).
     pub fn from_times(tracer: &'static str, quality: String, times: &[Duration], bytes: u64) -> Self {
-        let secs: Vec<f64> = times.iter().map(Duration::as_secs_f64).collect();
-        let (lo, hi) = secs.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &t| (lo.min(t), hi.max(t)));
+        let (lo, hi) = (times.iter().min().expect("a build"), times.iter().max().expect("a build"));
         BuildFigures {
             tracer,
             quality,
             seconds: median(times.to_vec()).as_secs_f64(),
-            seconds_range: (lo, hi),
+            seconds_range: (lo.as_secs_f64(), hi.as_secs_f64()),
             runs: times.len(),
             bytes,
         }
@@ -486,10 +485,10 @@ impl BenchReport {
     /// Why a summary row has no Embree figure although Embree ran on its set: every Embree
     /// call's hits differed from the reference's by more than the summary allows (edge cases
     /// of a large mesh can do that). One line per ray set, naming both hit counts.
-    fn left_out(&self) -> Vec<String> {
+    fn left_out(&self, summary: &[SummaryRow]) -> Vec<String> {
         let mut out = Vec::new();
         let mut seen: Vec<&str> = Vec::new();
-        for r in self.summary().iter().filter(|r| r.embree.is_none()) {
+        for r in summary.iter().filter(|r| r.embree.is_none()) {
             let embree = self.rows.iter().find(|e| e.tracer == "embree" && e.rays == r.rays && e.threads == r.threads);
             let Some(e) = embree.filter(|_| !seen.contains(&r.rays)) else { continue };
             seen.push(r.rays);
@@ -537,7 +536,7 @@ impl BenchReport {
     /// What the rays were: the built-in sets, or the `--rays` file's (whose rows are the set
     /// `file`).
     fn ray_sets(&self) -> String {
-        match self.rows.iter().find(|r| r.rays == "file") {
+        match self.rows.iter().find(|r| r.rays == raysets::RaySetKind::File.name()) {
             Some(r) => format!("{} rays from the --rays file, traced as closest-hit rays", r.ray_count),
             None => format!(
                 "primary rays {}x{} in 4x4 tiles, diffuse and shadow rays from their hits",
@@ -596,7 +595,7 @@ impl BenchReport {
                 "ratio: best raypack median over best Embree median; min-max: raypack's slowest run over Embree's fastest, and its fastest over Embree's slowest"
             );
         }
-        for line in self.left_out() {
+        for line in self.left_out(&summary) {
             let _ = writeln!(s, "{line}");
         }
         if let Some(line) = self.build_line() {
