@@ -66,10 +66,10 @@ impl PoolCache {
             return Err(PyValueError::new_err("threads: expected None (all cores) or at least 1, got 0"));
         }
         let mut cached = self.0.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some((m, pool)) = cached.as_ref() {
-            if *m == n {
-                return Ok(Some(pool.clone()));
-            }
+        if let Some((m, pool)) = cached.as_ref()
+            && *m == n
+        {
+            return Ok(Some(pool.clone()));
         }
         let pool = Arc::new(
             rayon::ThreadPoolBuilder::new()

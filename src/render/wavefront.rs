@@ -184,6 +184,7 @@ impl Wavefront {
             self.alive.clear();
             let scene = tracer.scene();
             resize(&mut self.surfaces, q.rays.len(), MISSED);
+            scene.prefetch_hits(&q.hits);
             for ((s, ray), hit) in self.surfaces.iter_mut().zip(&q.rays).zip(&q.hits) {
                 if hit.is_hit() {
                     *s = scene.surface(ray, hit);

@@ -45,6 +45,31 @@ impl TrianglesSoa {
         [self.positions[a as usize], self.positions[b as usize], self.positions[c as usize]]
     }
 
+    /// Starts fetching triangle `i`'s vertex indices into the cache: a hint with no effect on
+    /// any result (nothing happens when `i` is out of range). See [`Scene::prefetch_hits`].
+    #[inline(always)]
+    pub(crate) fn prefetch_indices(&self, i: usize) {
+        if let Some(t) = self.indices.get(i) {
+            crate::bvh::bvh8::prefetch_line((t as *const [u32; 3]).cast());
+        }
+    }
+
+    /// Starts fetching triangle `i`'s three corners (and their shading normals, when the
+    /// mesh has them) into the cache; reads its indices, so fetch those first
+    /// ([`TrianglesSoa::prefetch_indices`]). A hint with no effect on any result.
+    #[inline(always)]
+    pub(crate) fn prefetch_corners(&self, i: usize) {
+        let Some(&corners) = self.indices.get(i) else { return };
+        for v in corners {
+            if let Some(p) = self.positions.get(v as usize) {
+                crate::bvh::bvh8::prefetch_line((p as *const Vec3).cast());
+            }
+            if let Some(n) = self.normals.get(v as usize) {
+                crate::bvh::bvh8::prefetch_line((n as *const Vec3).cast());
+            }
+        }
+    }
+
     /// Bounds of triangle `i`.
     #[inline]
     pub fn bounds(&self, i: usize) -> Aabb {
@@ -297,6 +322,36 @@ impl Scene {
             }
         }
         hit
+    }
+
+    /// Starts fetching into the cache the geometry of every triangle `hits` hit (index
+    /// triples first, then corners and shading normals), for a loop that reads it next
+    /// ([`Scene::surface`], normals, ...). A hint with no effect on any result. On meshes
+    /// larger than the cache each hit's geometry costs two dependent misses; fetched this way
+    /// for a whole batch first, the misses overlap instead of being waited for one by one.
+    ///
+    /// ```
+    /// # use raypack::{BuildOptions, Hit, Material, Ray, SceneBuilder, Vec3};
+    /// let mut b = SceneBuilder::new();
+    /// let m = b.add_material(Material::default());
+    /// b.add_mesh(&[Vec3::ZERO, Vec3::X, Vec3::Y], &[[0, 1, 2]], m)?;
+    /// b.add_sphere(Vec3::new(5.0, 0.0, 0.0), 1.0, m)?;
+    /// let (scene, _) = b.commit(&BuildOptions::default());
+    /// let rays = [Ray::new(Vec3::new(0.25, 0.25, 2.0), -Vec3::Z), Ray::new(Vec3::new(5.0, 0.0, 3.0), -Vec3::Z)];
+    /// let mut hits = [Hit::MISS; 3]; // the last one stays a miss
+    /// scene.intersect_stream(&rays, &mut hits[..2]);
+    /// scene.prefetch_hits(&hits); // misses and spheres are skipped
+    /// let normals: Vec<Vec3> = rays.iter().zip(&hits).map(|(r, h)| scene.surface(r, h).geometric_normal).collect();
+    /// assert_eq!(normals, [Vec3::Z, Vec3::Z]);
+    /// # Ok::<(), raypack::SceneError>(())
+    /// ```
+    pub fn prefetch_hits(&self, hits: &[Hit]) {
+        for h in hits {
+            self.triangles.prefetch_indices(h.prim as usize); // misses and spheres: out of range
+        }
+        for h in hits {
+            self.triangles.prefetch_corners(h.prim as usize);
+        }
     }
 
     /// Closest hit along `ray` (the BVH8 single-ray kernel). Invalid rays
