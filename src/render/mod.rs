@@ -225,6 +225,8 @@ fn render_tile(
     let cap = npix * pass as usize;
     wavefront.reserve(cap, integrator);
     let mut owner: Vec<u32> = Vec::with_capacity(cap);
+    // The image positions of the pass's samples, turned into camera rays four at a time.
+    let mut positions: Vec<[f32; 2]> = Vec::with_capacity(cap);
     let mut log = RayLog::default();
     let mut phases = PhaseTimes::default();
     let mut invalid = 0u64;
@@ -239,6 +241,7 @@ fn render_tile(
             let t0 = Instant::now();
             wavefront.clear();
             owner.clear();
+            positions.clear();
             for (i, est) in pixels.iter().enumerate() {
                 if est.done {
                     continue;
@@ -248,10 +251,19 @@ fn render_tile(
                     let mut rng = Rng::new(settings.seed, sample_stream(y * w + x, s));
                     // One sample goes through the pixel centre; more are jittered uniformly.
                     let (jx, jy) = if centre_only { (0.5, 0.5) } else { rng.next_2d() };
-                    let ray = camera.ray(x as f32 + jx, y as f32 + jy, w, h);
-                    log.record(RayKind::Camera, &ray);
-                    wavefront.push_camera(ray, rng);
+                    positions.push([x as f32 + jx, y as f32 + jy]);
+                    wavefront.push_path(rng);
                     owner.push(i as u32);
+                }
+            }
+            for four in positions.chunks(4) {
+                let (mut px, mut py) = ([0.5f32; 4], [0.5f32; 4]);
+                for (k, p) in four.iter().enumerate() {
+                    (px[k], py[k]) = (p[0], p[1]);
+                }
+                for ray in &camera.rays4(px, py, w, h)[..four.len()] {
+                    log.record(RayKind::Camera, ray);
+                    wavefront.push_camera_ray(*ray);
                 }
             }
             phases.generate += t0.elapsed();

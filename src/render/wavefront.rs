@@ -2,7 +2,8 @@
 //! ray of a bounce is traced in one stream through the packet kernels.
 //!
 //! A batch (the camera samples of one pass over a tile) goes through:
-//! 1. *generate*: the caller queues one camera ray per path ([`Wavefront::push_camera`]);
+//! 1. *generate*: the caller queues one path and its camera ray per sample
+//!    ([`Wavefront::push_path`], [`Wavefront::push_camera_ray`]);
 //! 2. *trace*: the camera rays as one closest-hit stream;
 //! 3. *shade*: each hit adds its emission, queues its direct-lighting samples (shadow rays, or
 //!    hemisphere rays under `-H`), samples its BSDF and plays Russian roulette
@@ -122,11 +123,19 @@ impl Wavefront {
         self.paths.is_empty()
     }
 
-    /// Adds a path starting with camera ray `ray`, drawing from `rng`.
+    /// Adds a path drawing from `rng`; its camera ray follows with
+    /// [`Wavefront::push_camera_ray`] (the paths' rays in the order of the paths).
     #[inline]
-    pub fn push_camera(&mut self, ray: Ray, rng: Rng) {
-        self.camera.push(ray, self.paths.len() as u32);
+    pub fn push_path(&mut self, rng: Rng) {
         self.paths.push(PathState::new(rng));
+    }
+
+    /// Sets the camera ray of the next path that has none yet.
+    #[inline]
+    pub fn push_camera_ray(&mut self, ray: Ray) {
+        let id = self.camera.rays.len() as u32;
+        debug_assert!((id as usize) < self.paths.len(), "a camera ray for a path not pushed");
+        self.camera.push(ray, id);
     }
 
     /// The radiance each path of the batch brought back, in the order they were pushed.
