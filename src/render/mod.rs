@@ -225,7 +225,7 @@ fn render_tile(
     let cap = npix * pass as usize;
     wavefront.reserve(cap, integrator);
     let mut owner: Vec<u32> = Vec::with_capacity(cap);
-    // The image positions of the pass's samples, turned into camera rays four at a time.
+    // The image positions of the pass's samples, made into camera rays together.
     let mut positions: Vec<[f32; 2]> = Vec::with_capacity(cap);
     let mut log = RayLog::default();
     let mut phases = PhaseTimes::default();
@@ -256,16 +256,10 @@ fn render_tile(
                     owner.push(i as u32);
                 }
             }
-            for four in positions.chunks(4) {
-                let (mut px, mut py) = ([0.5f32; 4], [0.5f32; 4]);
-                for (k, p) in four.iter().enumerate() {
-                    (px[k], py[k]) = (p[0], p[1]);
-                }
-                for ray in &camera.rays4(px, py, w, h)[..four.len()] {
-                    log.record(RayKind::Camera, ray);
-                    wavefront.push_camera_ray(*ray);
-                }
-            }
+            camera.rays_through(&positions, w, h, |ray| {
+                log.record(RayKind::Camera, &ray);
+                wavefront.push_camera_ray(ray);
+            });
             phases.generate += t0.elapsed();
             wavefront.run(integrator, order, &mut log, &mut phases);
             let t1 = Instant::now();
