@@ -6,8 +6,10 @@
 //!   cannot make a query panic. One linear pass, cheap enough for every start from the BVH
 //!   cache (`scene::cache`), which runs it on each file it loads.
 //! * [`validate_bvh2`] and [`validate_bvh8`]: those, plus the geometry. Every box holds its
-//!   children's and its primitives' boxes, every primitive appears exactly once, padding lanes
-//!   are inert. For tests and `raypack info --validate`.
+//!   children's boxes; every primitive is referenced, never twice by one leaf, and the boxes
+//!   of the leaves that reference it together hold its box (once, in a tree without spatial
+//!   splits, whose leaf box then holds it whole; with them, each leaf holds a part); padding
+//!   lanes are inert. For tests and `raypack info --validate`.
 //!
 //! Both builders store children after their parent (depth-first order), which the index checks
 //! require: one pass in index order then sees each node's depth before its children's, so the
@@ -105,28 +107,22 @@ pub fn check_bvh8_indices<T: TriBlock>(b8: &Bvh8<T>, num_prims: usize) -> Result
     Ok(())
 }
 
-/// Checks [`check_bvh2_indices`], then that every child box lies inside its parent's, every
-/// leaf box holds its primitives' boxes (`prim_bounds[id]`) and every primitive id appears
-/// exactly once. Returns a description of the first violation.
+/// Checks [`check_bvh2_indices`], then that every child box lies inside its parent's and
+/// that the leaves cover every primitive ([`Coverage`]). Returns a description of the first
+/// violation.
 pub fn validate_bvh2(bvh: &Bvh2, prim_bounds: &[Aabb]) -> Result<(), String> {
     if bvh.is_empty() {
         return if prim_bounds.is_empty() { Ok(()) } else { Err("empty tree over non-empty input".into()) };
     }
     check_bvh2_indices(bvh, prim_bounds.len())?;
     // Every index below is in range, and every node is reached once.
-    let mut seen = vec![false; prim_bounds.len()];
+    let mut cover = Coverage::new(prim_bounds);
     let mut stack = vec![0usize];
     while let Some(i) = stack.pop() {
         let n = &bvh.nodes[i];
         if n.is_leaf() {
-            for &id in &bvh.prim_ids[n.start as usize..(n.start + n.count) as usize] {
-                if !n.bounds.contains_box(&prim_bounds[id as usize]) {
-                    return Err(format!("leaf {i} does not contain prim {id}"));
-                }
-                if std::mem::replace(&mut seen[id as usize], true) {
-                    return Err(format!("prim {id} referenced twice"));
-                }
-            }
+            let ids = &bvh.prim_ids[n.start as usize..(n.start + n.count) as usize];
+            cover.leaf(&n.bounds, ids.iter().copied()).map_err(|e| format!("leaf {i}: {e}"))?;
         } else {
             for c in [n.start as usize, n.start as usize + 1] {
                 if !n.bounds.contains_box(&bvh.nodes[c].bounds) {
@@ -136,18 +132,18 @@ pub fn validate_bvh2(bvh: &Bvh2, prim_bounds: &[Aabb]) -> Result<(), String> {
             }
         }
     }
-    all_seen(&seen)
+    cover.finish()
 }
 
 /// Checks [`check_bvh8_indices`], then that every node is reached; every child box lies
-/// inside the parent's slot box; every leaf box holds its primitives' boxes
-/// (`prim_bounds[id]`); every primitive id appears exactly once; padding lanes of blocks are
-/// inert (zero edges, NaN radius). Returns a description of the first violation.
+/// inside the parent's slot box; the leaves cover every primitive ([`Coverage`]); padding
+/// lanes of blocks are inert (zero edges, NaN radius). Returns a description of the first
+/// violation.
 pub fn validate_bvh8<T: TriBlock>(bvh: &Bvh8<T>, prim_bounds: &[Aabb]) -> Result<(), String> {
     check_bvh8_indices(bvh, prim_bounds.len())?;
     // Every index below is in range, every node is reached at most once and empty slots are
     // never hit.
-    let mut seen = vec![false; prim_bounds.len()];
+    let mut cover = Coverage::new(prim_bounds);
     let mut reached = vec![false; bvh.nodes.len()];
     let mut stack = vec![0usize];
     while let Some(i) = stack.pop() {
@@ -169,14 +165,7 @@ pub fn validate_bvh8<T: TriBlock>(bvh: &Bvh8<T>, prim_bounds: &[Aabb]) -> Result
                 stack.push(k);
                 continue;
             }
-            for id in bvh.leaf_prims(c) {
-                if !b.contains_box(&prim_bounds[id as usize]) {
-                    return Err(format!("leaf in slot {slot} of node {i} does not contain prim {id}"));
-                }
-                if std::mem::replace(&mut seen[id as usize], true) {
-                    return Err(format!("prim {id} referenced twice"));
-                }
-            }
+            cover.leaf(&b, bvh.leaf_prims(c)).map_err(|e| format!("leaf in slot {slot} of node {i}: {e}"))?;
         }
     }
     if let Some(i) = reached.iter().position(|r| !r) {
@@ -197,13 +186,52 @@ pub fn validate_bvh8<T: TriBlock>(bvh: &Bvh8<T>, prim_bounds: &[Aabb]) -> Result
             }
         }
     }
-    all_seen(&seen)
+    cover.finish()
 }
 
-/// The first primitive no leaf referenced, as an error.
-fn all_seen(seen: &[bool]) -> Result<(), String> {
-    match seen.iter().position(|s| !s) {
-        Some(id) => Err(format!("prim {id} not referenced")),
-        None => Ok(()),
+/// What the leaves of a tree say about each primitive: how often they reference it and the
+/// union of their boxes.
+struct Coverage<'a> {
+    prim_bounds: &'a [Aabb],
+    boxes: Vec<Aabb>,
+    refs: Vec<u32>,
+}
+
+impl<'a> Coverage<'a> {
+    fn new(prim_bounds: &'a [Aabb]) -> Self {
+        Self { prim_bounds, boxes: vec![Aabb::EMPTY; prim_bounds.len()], refs: vec![0; prim_bounds.len()] }
+    }
+
+    /// Records a leaf with box `b` referencing `ids` (in range): no id twice, and each
+    /// primitive's box overlaps `b`.
+    fn leaf(&mut self, b: &Aabb, ids: impl IntoIterator<Item = u32>) -> Result<(), String> {
+        let mut seen = Vec::new();
+        for id in ids {
+            if seen.contains(&id) {
+                return Err(format!("references prim {id} twice"));
+            }
+            seen.push(id);
+            let p = &self.prim_bounds[id as usize];
+            if !(Aabb { min: p.min.max(b.min), max: p.max.min(b.max) }).is_valid() {
+                return Err(format!("does not overlap prim {id}"));
+            }
+            let i = id as usize;
+            self.boxes[i] = self.boxes[i].union(b);
+            self.refs[i] += 1;
+        }
+        Ok(())
+    }
+
+    /// Every primitive referenced, and held by its leaves' boxes together.
+    fn finish(&self) -> Result<(), String> {
+        for (id, p) in self.prim_bounds.iter().enumerate() {
+            if self.refs[id] == 0 {
+                return Err(format!("prim {id} not referenced"));
+            }
+            if !self.boxes[id].contains_box(p) {
+                return Err(format!("the leaves referencing prim {id} do not contain it"));
+            }
+        }
+        Ok(())
     }
 }
