@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{random_rays, scene_of};
+use common::{random_rays, scene_of, slivers};
 use raypack::bvh::validate::validate_bvh2;
 use raypack::generate::{grid, random_soup, uv_sphere};
 use raypack::{BuildOptions, BuildQuality, Hit, Ray, Scene, SplitMethod, Vec3};
@@ -58,6 +58,11 @@ fn random_soups_over_leaf_sizes() {
             let soup = random_soup(3000, 0.08, seed);
             let opts = BuildOptions { max_leaf_size: leaf, quality, ..BuildOptions::default() };
             let scene = scene_of(&[&soup], &[], &opts);
+            if quality == BuildQuality::Medium {
+                // No spatial splits: one reference per primitive, so `check`'s validation
+                // proves each is referenced exactly once.
+                assert_eq!(scene.bvh2().unwrap().prim_ids.len(), scene.num_prims());
+            }
             total += check(&scene, &random_rays(&scene, 40_000, seed), &format!("soup leaf {leaf} {quality:?}"));
         }
     }
@@ -161,11 +166,16 @@ fn build_is_identical_whatever_the_thread_count() {
     // The BVH2 and the BVH8 arrays (nodes, triangle and sphere blocks), bit for bit, built in a
     // rayon pool of 1 and of 2 threads, for both block layouts. (The image part of determinism
     // is in tests/render_cli.rs.)
+    // High quality with slivers makes the builder cut triangles, its spatial binning in
+    // parallel chunks near the root.
     let mut mesh = random_soup(200_000, 0.01, 21);
     mesh.append(&uv_sphere(60, 120));
+    mesh.append(&slivers(2000, 22));
     let spheres: Vec<(Vec3, f32)> = (0..300).map(|i| (Vec3::new(i as f32 * 0.006 - 0.9, 0.1, -0.2), 0.01)).collect();
-    for watertight in [false, true] {
-        let opts = BuildOptions { watertight, keep_bvh2: true, ..BuildOptions::default() };
+    for (watertight, quality) in
+        [(false, BuildQuality::Medium), (true, BuildQuality::Medium), (false, BuildQuality::High)]
+    {
+        let opts = BuildOptions { watertight, quality, keep_bvh2: true, ..BuildOptions::default() };
         let build = |threads| {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             pool.install(|| scene_of(&[&mesh], &spheres, &opts))
@@ -173,7 +183,9 @@ fn build_is_identical_whatever_the_thread_count() {
         let (a, b) = (build(1), build(2));
         assert_eq!(a.bvh2().unwrap().prim_ids, b.bvh2().unwrap().prim_ids);
         assert_eq!(a.bvh2().unwrap().nodes, b.bvh2().unwrap().nodes);
-        assert_eq!(bvh8_bits(&a), bvh8_bits(&b), "BVH8 differs between 1 and 2 threads (watertight {watertight})");
+        assert_eq!(bvh8_bits(&a), bvh8_bits(&b), "BVH8 differs between 1 and 2 threads ({opts:?})");
+        let refs = a.bvh2().unwrap().prim_ids.len();
+        assert_eq!(refs > a.num_prims(), quality == BuildQuality::High, "{refs} references ({quality:?})");
         assert!(a.bvh8().tris.len() > 10_000 && !a.bvh8().spheres.is_empty());
     }
 }

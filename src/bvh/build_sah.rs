@@ -18,6 +18,7 @@
 //! of one algorithm over the same primitive, bin and slot types, read top to bottom.)
 
 use crate::bvh::limits::MAX_DEPTH;
+use crate::bvh::spatial::{self, Splitter};
 use crate::bvh::{Bvh2, Bvh2Node};
 use crate::math::{Aabb, Vec3, Vec4};
 
@@ -36,7 +37,9 @@ pub enum BuildQuality {
     /// The default trade-off.
     #[default]
     Medium,
-    /// More bins, and small nodes split by the SAH; for final renders of large scenes.
+    /// More bins, small nodes split by the SAH, and spatial splits where triangles overlap
+    /// ([`BuildOptions::spatial_split_budget`]); for final renders and large scenes traced
+    /// many times.
     High,
 }
 
@@ -60,6 +63,10 @@ pub struct BuildOptions {
     pub bins: Option<usize>,
     /// Effort knob.
     pub quality: BuildQuality,
+    /// At [`BuildQuality::High`], the references spatial splits may add
+    /// ([`crate::bvh::spatial`]), as a fraction of the primitives; 0 turns them off. Embree's
+    /// high-quality builder allows 0.2.
+    pub spatial_split_budget: f32,
     /// Split rule.
     pub split: SplitMethod,
     /// Cost of one traversal step relative to one primitive test.
@@ -82,6 +89,7 @@ impl Default for BuildOptions {
             max_leaf_size: 4,
             bins: None,
             quality: BuildQuality::Medium,
+            spatial_split_budget: 0.2,
             split: SplitMethod::Sah,
             traversal_cost: 1.0,
             watertight: false,
@@ -139,6 +147,27 @@ impl BuildPrim {
     #[inline]
     pub fn id(&self) -> u32 {
         self.lower.w.to_bits() ^ ID_BITS_BIAS
+    }
+
+    /// A reference to primitive `id` with box `bounds` that may be cut `budget` more times
+    /// ([`crate::bvh::spatial`]).
+    #[inline]
+    pub(super) fn with_budget(bounds: Aabb, id: u32, budget: u32) -> Self {
+        let mut p = Self::new(bounds, id);
+        p.set_budget(budget);
+        p
+    }
+
+    /// How many more times spatial splits may cut this reference (held in `upper.w` as a
+    /// small whole float; 0 for a plain build).
+    #[inline]
+    pub(super) fn budget(&self) -> u32 {
+        self.upper.w as u32
+    }
+
+    #[inline]
+    pub(super) fn set_budget(&mut self, budget: u32) {
+        self.upper.w = budget as f32;
     }
 
     /// The primitive's box.
@@ -246,6 +275,61 @@ pub fn build_bvh2_kinds(prims: &mut [BuildPrim], opts: &BuildOptions, first_of_s
     Bvh2 { nodes, prim_ids: prim_ids(prims) }
 }
 
+/// [`build_bvh2_kinds`] with the spatial splits of [`crate::bvh::spatial`]: where
+/// triangles make the two sides of an object split overlap, the builder may cut them along a
+/// plane instead, so that a triangle can be referenced by several leaves, each holding the
+/// part of it inside its box. `triangle(id)` gives the corners of triangle `id` (ids below
+/// `first_of_second_kind`); at most `budget * prims.len()` references are added (Embree
+/// allows 0.2). No subtree of at most `opts.collapse.max_leaf_prims` references holds a
+/// triangle twice, so no leaf of the collapsed tree does.
+pub fn build_bvh2_spatial(
+    mut prims: Vec<BuildPrim>,
+    opts: &BuildOptions,
+    first_of_second_kind: u32,
+    budget: f32,
+    triangle: &(dyn Fn(u32) -> [Vec3; 3] + Sync),
+) -> Bvh2 {
+    let n = prims.len();
+    if n == 0 {
+        return build_bvh2_kinds(&mut prims, opts, first_of_second_kind);
+    }
+    crate::bvh::spatial::init_budgets(&mut prims, first_of_second_kind);
+    let info = PrimInfo::of_par(&prims);
+    let splitter = crate::bvh::spatial::Splitter {
+        triangle,
+        first_sphere: first_of_second_kind,
+        root_half_area: info.bounds.half_area(),
+        min_refs: opts.collapse.max_leaf_prims.max(opts.max_leaf_size),
+    };
+    let extra = (f64::from(budget.max(0.0)) * n as f64) as usize;
+    prims.resize(n + extra, BuildPrim::new(Aabb::EMPTY, 0));
+    let (mut slots, leaves) = build_slots_in(&mut prims, n, info, opts, first_of_second_kind, Some(&splitter));
+    let prims = squeeze(&mut slots, &prims);
+    let nodes = compact(&slots, leaves, &prims);
+    Bvh2 { nodes, prim_ids: prim_ids(&prims) }
+}
+
+/// Gathers the references of the leaves of `slots` in depth-first order, left first,
+/// leaving out the free space a spatial build did not use, and points each leaf at its new
+/// range: afterwards every subtree's references are contiguous, as [`compact`] and the
+/// collapse require.
+fn squeeze(slots: &mut [Slot], prims: &[BuildPrim]) -> Vec<BuildPrim> {
+    let mut out = Vec::with_capacity(prims.len());
+    let mut stack = vec![0usize];
+    while let Some(s) = stack.pop() {
+        let slot = slots[s];
+        if slot.count & INNER == 0 {
+            let (a, n) = (slot.a as usize, slot.count as usize);
+            slots[s].a = out.len() as u32;
+            out.extend_from_slice(&prims[a..a + n]);
+        } else {
+            stack.push(slot.a as usize);
+            stack.push(s + 1);
+        }
+    }
+    out
+}
+
 /// The primitives' ids in their final (leaf) order (in parallel: for large meshes the first
 /// writes to fresh memory, page faults included, are a large part of the cost).
 fn prim_ids(prims: &[BuildPrim]) -> Vec<u32> {
@@ -273,19 +357,32 @@ const INNER: u32 = 1 << 31;
 /// The binned SAH build into the reserved-range slots that [`compact`] renumbers.
 /// Returns the slots and the number of leaves.
 fn build_slots(prims: &mut [BuildPrim], opts: &BuildOptions, first_of_second_kind: u32) -> (Vec<Slot>, usize) {
-    let n = prims.len();
-    if n == 0 {
+    if prims.is_empty() {
         return (Vec::new(), 0);
     }
-    // Reserved-range slots (see the module docs and `Slot`). Zero-filled memory costs
-    // nothing until touched, and only used slots are ever read.
-    let mut slots: Vec<Slot> = bytemuck::zeroed_vec(2 * n - 1);
+    let info = PrimInfo::of_par(prims);
+    build_slots_in(prims, prims.len(), info, opts, first_of_second_kind, None)
+}
+
+/// [`build_slots`] over the first `n` of `prims` (bounds `info`), the rest being free space
+/// for the references spatial splits add (with `splitter`).
+fn build_slots_in(
+    prims: &mut [BuildPrim],
+    n: usize,
+    info: PrimInfo,
+    opts: &BuildOptions,
+    first_of_second_kind: u32,
+    splitter: Option<&Splitter>,
+) -> (Vec<Slot>, usize) {
+    // Reserved-range slots (see the module docs and `Slot`), two per reference the
+    // subtree may end up holding. Zero-filled memory costs nothing until touched, and only
+    // used slots are ever read.
+    let mut slots: Vec<Slot> = bytemuck::zeroed_vec(2 * prims.len() - 1);
     let max_leaf = opts.max_leaf_size.clamp(1, INNER as usize - 1);
     // See `BuildQuality`: below High, every node of at most `max_leaf` primitives is a leaf.
     let leaf_at_most = if opts.quality == BuildQuality::High { 1 } else { max_leaf };
-    let ctx = Ctx { opts, bins: opts.bin_count(), max_leaf, leaf_at_most, first_of_second_kind };
-    let info = PrimInfo::of_par(prims);
-    let leaves = build_rec(&ctx, prims, 0, &mut slots, 0, info, 0, &mut Scratch::new());
+    let ctx = Ctx { opts, bins: opts.bin_count(), max_leaf, leaf_at_most, first_of_second_kind, splitter };
+    let leaves = build_rec(&ctx, prims, n, 0, &mut slots, 0, info, 0, &mut Scratch::new());
     (slots, leaves)
 }
 
@@ -296,15 +393,19 @@ struct Ctx<'a> {
     first_of_second_kind: u32,
     /// Nodes of at most this many primitives become leaves without weighing a split.
     leaf_at_most: usize,
+    /// Present when spatial splits are allowed.
+    splitter: Option<&'a Splitter<'a>>,
 }
 
-/// Builds the subtree over `prims` (which start at `first` in the global array, and whose
-/// bounds are `info`) into `slots`, whose slot 0 is the subtree root and whose global index
-/// is `base`; returns the number of leaves.
+/// Builds the subtree over the first `n` of `prims` (which start at `first` in the global
+/// array, and whose bounds are `info`; the rest of `prims` is free space for spatial splits)
+/// into `slots`, whose slot 0 is the subtree root and whose global index is `base`; returns
+/// the number of leaves.
 #[allow(clippy::too_many_arguments)]
 fn build_rec(
     ctx: &Ctx,
     prims: &mut [BuildPrim],
+    n: usize,
     first: usize,
     slots: &mut [Slot],
     base: u32,
@@ -312,28 +413,36 @@ fn build_rec(
     depth: usize,
     scratch: &mut Scratch,
 ) -> usize {
-    let n = prims.len();
-    debug_assert_eq!(slots.len(), 2 * n - 1);
-    let split = if n <= ctx.leaf_at_most { None } else { choose_split(ctx, prims, &info, depth, scratch) };
-    let Some((mid, li, ri)) = split else {
-        return make_leaf(ctx, prims, first, slots, base);
+    debug_assert!(n >= 1 && n <= prims.len());
+    debug_assert_eq!(slots.len(), 2 * prims.len() - 1);
+    let split = if n <= ctx.leaf_at_most { None } else { choose_split(ctx, prims, n, &info, depth, scratch) };
+    let Some((mid, total, li, ri)) = split else {
+        return make_leaf(ctx, &mut prims[..n], first, slots, base);
     };
-    debug_assert!(mid > 0 && mid < n);
-    let (lp, rp) = prims.split_at_mut(mid);
-    let nl = lp.len();
+    debug_assert!(mid > 0 && mid < total && total <= prims.len());
+    // The free space left goes to the children in proportion to their references: the right
+    // child's move up to make room for the left one's share.
+    let free = prims.len() - total;
+    let left_free = (free as u64 * mid as u64 / total as u64) as usize;
+    if left_free > 0 {
+        prims.copy_within(mid..total, mid + left_free);
+    }
+    let (lp, rp) = prims.split_at_mut(mid + left_free);
+    let (nl, nr) = (mid, total - mid);
+    let cl = lp.len();
     let (_, rest) = slots.split_at_mut(1);
-    let (ls, rs) = rest.split_at_mut(2 * nl - 1);
+    let (ls, rs) = rest.split_at_mut(2 * cl - 1);
     let left = base + 1;
-    let right = base + 2 * nl as u32;
+    let right = base + 2 * cl as u32;
     let (ll, rl) = if n > PARALLEL_SUBTREE_THRESHOLD {
         rayon::join(
-            || build_rec(ctx, lp, first, ls, left, li, depth + 1, scratch),
-            || build_rec(ctx, rp, first + nl, rs, right, ri, depth + 1, &mut Scratch::new()),
+            || build_rec(ctx, lp, nl, first, ls, left, li, depth + 1, scratch),
+            || build_rec(ctx, rp, nr, first + cl, rs, right, ri, depth + 1, &mut Scratch::new()),
         )
     } else {
         (
-            build_rec(ctx, lp, first, ls, left, li, depth + 1, scratch),
-            build_rec(ctx, rp, first + nl, rs, right, ri, depth + 1, scratch),
+            build_rec(ctx, lp, nl, first, ls, left, li, depth + 1, scratch),
+            build_rec(ctx, rp, nr, first + cl, rs, right, ri, depth + 1, scratch),
         )
     };
     slots[0] = Slot { a: right, count: INNER | ll as u32 };
@@ -358,22 +467,26 @@ fn make_leaf(ctx: &Ctx, prims: &mut [BuildPrim], first: usize, slots: &mut [Slot
     2
 }
 
-/// Chooses where to split `prims` and partitions them; returns the size of the left part
-/// and both parts' [`PrimInfo`], or `None` to make a leaf.
+/// Chooses where to split the first `n` of `prims` and partitions them; returns the size of
+/// the left part, the number of references after the split (more than `n` when a spatial
+/// split cut some, their second parts taken from the free space after `n`) and both parts'
+/// [`PrimInfo`], or `None` to make a leaf.
 fn choose_split(
     ctx: &Ctx,
-    prims: &mut [BuildPrim],
+    all: &mut [BuildPrim],
+    n: usize,
     info: &PrimInfo,
     depth: usize,
     scratch: &mut Scratch,
-) -> Option<(usize, PrimInfo, PrimInfo)> {
-    let n = prims.len();
+) -> Option<(usize, usize, PrimInfo, PrimInfo)> {
+    let with_total = |(mid, li, ri)| (mid, n, li, ri);
+    let prims = &mut all[..n];
     let cb = &info.centroids;
     let must_split = n > ctx.max_leaf;
     let ext = cb.extent();
     if ctx.opts.split == SplitMethod::Median || depth >= FORCE_MEDIAN_DEPTH || ext.cmple(Vec3::ZERO).all() {
         // (All centroids equal: no plane separates them.)
-        return must_split.then(|| median_split(prims, cb));
+        return must_split.then(|| with_total(median_split(prims, cb)));
     }
     // Small nodes use fewer bins: more bins than primitives only cost time.
     let k = ctx.bins.min(n.max(8));
@@ -408,7 +521,7 @@ fn choose_split(
     }
     if !best.0.is_finite() {
         // All centroids fell into one bin (extremely clustered data).
-        return must_split.then(|| median_split(prims, cb));
+        return must_split.then(|| with_total(median_split(prims, cb)));
     }
     let area = info.bounds.half_area();
     if !must_split {
@@ -419,6 +532,28 @@ fn choose_split(
         }
     }
     let (axis, split_bin) = (best.1, best.2);
+    if let Some(sp) = ctx.splitter.filter(|sp| all.len() > n && n > sp.min_refs && must_split) {
+        let b = &scratch.bins[axis * MAX_BINS..axis * MAX_BINS + k];
+        let side = |bins: &[Bin]| bins.iter().fold(Box4::EMPTY, |acc, b| acc.union(&b.bounds)).aabb();
+        let node = info.bounds.aabb();
+        if spatial::worth_trying(sp, &node, &side(&b[..split_bin]), &side(&b[split_bin..])) {
+            let free = all.len() - n;
+            if let Some(s) = spatial::find(sp, &all[..n], &node)
+                .filter(|s| spatial::better(s.cost, best.0) && s.left + s.right <= n + free)
+            {
+                let total = spatial::split_refs(sp, all, n, s.axis, s.pos);
+                let prims = &mut all[..total];
+                let pos2 = 2.0 * s.pos;
+                let (mid, li, ri) = partition_with_info(prims, |c2| c2[s.axis] < pos2);
+                if mid == 0 || mid == total {
+                    let (mid, li, ri) = median_split(prims, &PrimInfo::of(prims).centroids);
+                    return Some((mid, total, li, ri));
+                }
+                return Some((mid, total, li, ri));
+            }
+        }
+    }
+    let prims = &mut all[..n];
     let (lo, scale) = maps[axis];
     // `min(trunc(x), k-1) < s` is `x < s` for the integer `s <= k-1`: the same arithmetic
     // as binning, without the float-to-int conversion.
@@ -426,9 +561,9 @@ fn choose_split(
     let (mid, li, ri) = partition_with_info(prims, |c2| (c2[axis] - lo) * scale < split);
     if mid == 0 || mid == n {
         // Cannot happen with exact arithmetic; guard against rounding anyway.
-        return Some(median_split(prims, cb));
+        return Some(with_total(median_split(prims, cb)));
     }
-    Some((mid, li, ri))
+    Some((mid, n, li, ri))
 }
 
 /// One SAH bin: bounds of the primitives in it and their count.

@@ -18,13 +18,16 @@ pub mod frustum;
 pub mod limits;
 pub mod node;
 pub mod queries;
+pub mod spatial;
 pub mod stats;
 pub mod traverse1;
 pub mod traverse_packet;
 pub mod validate;
 
 pub use array::BvhArray;
-pub use build_sah::{BuildOptions, BuildPrim, BuildQuality, SplitMethod, build_bvh2, build_bvh2_kinds};
+pub use build_sah::{
+    BuildOptions, BuildPrim, BuildQuality, SplitMethod, build_bvh2, build_bvh2_kinds, build_bvh2_spatial,
+};
 pub use bvh2::{Bvh2, Bvh2Node};
 pub use bvh8::{Bvh8, Bvh8Stats, DefaultTriBlock};
 pub use collapse::{CollapseMethod, CollapseOptions, PrimShape, collapse, collapse_for};

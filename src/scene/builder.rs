@@ -6,7 +6,9 @@
 //! collinear triangles, non-positive radii) and counts them in the [`CommitReport`], as Embree does.
 //! An empty scene is legal: every ray misses.
 
-use crate::bvh::{BuildOptions, BuildPrim, Bvh2, Bvh8, build_bvh2_kinds, collapse_for};
+use crate::bvh::{
+    BuildOptions, BuildPrim, BuildQuality, Bvh2, Bvh8, SplitMethod, build_bvh2_kinds, build_bvh2_spatial, collapse_for,
+};
 use crate::geometry::TriangleTest;
 use crate::math::{Aabb, Vec3};
 use crate::scene::{Camera, Light, Material, MaterialId, Scene, SpheresSoa, TrianglesSoa};
@@ -339,8 +341,17 @@ impl Filtered {
             use rayon::prelude::*;
             prims.par_iter().map(|p| p.bounds()).reduce(|| Aabb::EMPTY, |a, b| a.union(&b))
         };
-        let bvh2 = build_bvh2_kinds(&mut prims, opts, nt as u32);
-        drop(prims);
+        // High quality cuts triangles that overlap badly (spatial splits, `bvh::spatial`).
+        let spatial =
+            opts.quality == BuildQuality::High && opts.spatial_split_budget > 0.0 && opts.split == SplitMethod::Sah;
+        let bvh2 = if spatial {
+            let corners = |id: u32| triangles.vertices(id as usize);
+            build_bvh2_spatial(prims, opts, nt as u32, opts.spatial_split_budget, &corners)
+        } else {
+            let bvh2 = build_bvh2_kinds(&mut prims, opts, nt as u32);
+            drop(prims);
+            bvh2
+        };
         let mut scene = Scene {
             triangles,
             spheres,

@@ -107,3 +107,20 @@ pub fn every_kernel_where(scene: &Scene, rays: &[Ray], keep: impl Fn(&Kernel) ->
     }
     out
 }
+
+/// `n` long thin triangles, each from near one side of the cube [-1, 1]^3 to near the
+/// opposite side, in random directions: the boxes of any object split overlap, which is
+/// where a builder's spatial splits (`BuildQuality::High`) cut triangles.
+pub fn slivers(n: usize, seed: u64) -> Mesh {
+    let mut rng = Rng::new(seed, 0x511_7E25);
+    let mut m = Mesh::default();
+    for i in 0..n as u32 {
+        let mut r3 = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 - 1.0;
+        let a = r3();
+        let b = -a + r3() * 0.1;
+        let c = a + r3() * 0.05;
+        m.positions.extend([a, b, c]);
+        m.indices.push([3 * i, 3 * i + 1, 3 * i + 2]);
+    }
+    m
+}
