@@ -108,7 +108,7 @@ pub fn check_bvh8_indices<T: TriBlock>(b8: &Bvh8<T>, num_prims: usize) -> Result
 }
 
 /// Checks [`check_bvh2_indices`], then that every child box lies inside its parent's and
-/// that the leaves cover every primitive ([`Coverage`]). Returns a description of the first
+/// that the leaves cover every primitive (see the module docs). Returns a description of the first
 /// violation.
 pub fn validate_bvh2(bvh: &Bvh2, prim_bounds: &[Aabb]) -> Result<(), String> {
     if bvh.is_empty() {
@@ -136,7 +136,7 @@ pub fn validate_bvh2(bvh: &Bvh2, prim_bounds: &[Aabb]) -> Result<(), String> {
 }
 
 /// Checks [`check_bvh8_indices`], then that every node is reached; every child box lies
-/// inside the parent's slot box; the leaves cover every primitive ([`Coverage`]); padding
+/// inside the parent's slot box; the leaves cover every primitive (see the module docs); padding
 /// lanes of blocks are inert (zero edges, NaN radius). Returns a description of the first
 /// violation.
 pub fn validate_bvh8<T: TriBlock>(bvh: &Bvh8<T>, prim_bounds: &[Aabb]) -> Result<(), String> {
