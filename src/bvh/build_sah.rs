@@ -293,9 +293,9 @@ pub fn build_bvh2_spatial(
     if n == 0 {
         return build_bvh2_kinds(&mut prims, opts, first_of_second_kind);
     }
-    crate::bvh::spatial::init_budgets(&mut prims, first_of_second_kind);
+    spatial::init_budgets(&mut prims, first_of_second_kind);
     let info = PrimInfo::of_par(&prims);
-    let splitter = crate::bvh::spatial::Splitter {
+    let splitter = Splitter {
         triangle,
         first_sphere: first_of_second_kind,
         root_half_area: info.bounds.half_area(),
@@ -536,21 +536,19 @@ fn choose_split(
         let b = &scratch.bins[axis * MAX_BINS..axis * MAX_BINS + k];
         let side = |bins: &[Bin]| bins.iter().fold(Box4::EMPTY, |acc, b| acc.union(&b.bounds)).aabb();
         let node = info.bounds.aabb();
-        if spatial::worth_trying(sp, &node, &side(&b[..split_bin]), &side(&b[split_bin..])) {
-            let free = all.len() - n;
-            if let Some(s) = spatial::find(sp, &all[..n], &node)
-                .filter(|s| spatial::better(s.cost, best.0) && s.left + s.right <= n + free)
-            {
-                let total = spatial::split_refs(sp, all, n, s.axis, s.pos);
-                let prims = &mut all[..total];
-                let pos2 = 2.0 * s.pos;
-                let (mid, li, ri) = partition_with_info(prims, |c2| c2[s.axis] < pos2);
-                if mid == 0 || mid == total {
-                    let (mid, li, ri) = median_split(prims, &PrimInfo::of(prims).centroids);
-                    return Some((mid, total, li, ri));
-                }
-                return Some((mid, total, li, ri));
+        if spatial::worth_trying(sp, &node, &side(&b[..split_bin]), &side(&b[split_bin..]))
+            && let Some(s) = spatial::find(sp, &all[..n], &node)
+                .filter(|s| spatial::better(s.cost, best.0) && s.left + s.right <= all.len())
+        {
+            let total = spatial::split_refs(sp, all, n, s.axis, s.pos);
+            let prims = &mut all[..total];
+            let pos2 = 2.0 * s.pos;
+            let mut split = partition_with_info(prims, |c2| c2[s.axis] < pos2);
+            if split.0 == 0 || split.0 == total {
+                split = median_split(prims, &PrimInfo::of(prims).centroids);
             }
+            let (mid, li, ri) = split;
+            return Some((mid, total, li, ri));
         }
     }
     let prims = &mut all[..n];
