@@ -491,7 +491,7 @@ fn choose_split(
     let k = bins_for(ctx, n);
     let maps: [(f32, f32); 3] =
         std::array::from_fn(|a| if ext[a] > 0.0 { bin_mapping(cb, a, k) } else { (cb.lower[a], 0.0) });
-    bin_prims(prims, &maps, k, &mut scratch.bins);
+    bin_prims(prims, &maps, k, &mut scratch.bins, &mut scratch.bins2);
     let mut best = (f32::INFINITY, 0usize, 0usize); // (cost, axis, split bin)
     for axis in (0..3).filter(|&a| ext[a] > 0.0) {
         let b = &scratch.bins[axis * MAX_BINS..axis * MAX_BINS + k];
@@ -579,13 +579,20 @@ impl Bin {
 struct Scratch {
     /// `3 * MAX_BINS` bins, axis-major.
     bins: Vec<Bin>,
+    /// A second set of bins: odd primitives bin here (see [`bin_prims`]).
+    bins2: Vec<Bin>,
     right_area: Vec<f32>,
     right_count: Vec<u32>,
 }
 
 impl Scratch {
     fn new() -> Self {
-        Self { bins: vec![Bin::EMPTY; 3 * MAX_BINS], right_area: vec![0.0; MAX_BINS], right_count: vec![0; MAX_BINS] }
+        Self {
+            bins: vec![Bin::EMPTY; 3 * MAX_BINS],
+            bins2: vec![Bin::EMPTY; 3 * MAX_BINS],
+            right_area: vec![0.0; MAX_BINS],
+            right_count: vec![0; MAX_BINS],
+        }
     }
 }
 
@@ -617,7 +624,7 @@ fn bin_mapping(cb: &Box4, axis: usize, k: usize) -> (f32, f32) {
 
 /// Fills the first `k` bins of each axis of `bins` with `prims`; large inputs bin in
 /// parallel chunks whose exact reduction keeps the result independent of the thread count.
-fn bin_prims(prims: &[BuildPrim], maps: &[(f32, f32); 3], k: usize, bins: &mut [Bin]) {
+fn bin_prims(prims: &[BuildPrim], maps: &[(f32, f32); 3], k: usize, bins: &mut [Bin], bins2: &mut [Bin]) {
     use wide::f32x4;
     // All three axes' bin indices in one SIMD step (one truncating conversion for the four
     // lanes); clamping in the float domain makes it exact and maps the unused fourth lane
@@ -625,32 +632,59 @@ fn bin_prims(prims: &[BuildPrim], maps: &[(f32, f32); 3], k: usize, bins: &mut [
     let lo = f32x4::new([maps[0].0, maps[1].0, maps[2].0, 0.0]);
     let scale = f32x4::new([maps[0].1, maps[1].1, maps[2].1, 0.0]);
     let top = f32x4::splat((k - 1) as f32);
-    let bin_chunk = |chunk: &[BuildPrim], bins: &mut [Bin]| {
-        // As an array, and with indices masked to `MAX_BINS - 1` (a no-op after the clamp),
+    let index = |p: &BuildPrim| {
+        let c: f32x4 = bytemuck::cast(p.centroid2());
+        ((c - lo) * scale).min(top).max(f32x4::ZERO).fast_trunc_int().to_array()
+    };
+    // Even and odd primitives go to two sets of bins, merged at the end: neighbours in a
+    // mesh mostly fall into the same bins, and one set would chain every update to the
+    // previous one through memory. (Unions and sums are exact, so the bins are the same.)
+    let bin_chunk = |chunk: &[BuildPrim], bins: &mut [Bin], bins2: &mut [Bin]| {
+        // As arrays, and with indices masked to `MAX_BINS - 1` (a no-op after the clamp),
         // the compiler sees every index in range and drops the bounds checks.
         let bins: &mut [Bin; 3 * MAX_BINS] = bins.try_into().expect("3 * MAX_BINS bins");
+        let bins2: &mut [Bin; 3 * MAX_BINS] = bins2.try_into().expect("3 * MAX_BINS bins");
         for a in 0..3 {
             bins[a * MAX_BINS..a * MAX_BINS + k].fill(Bin::EMPTY);
+            bins2[a * MAX_BINS..a * MAX_BINS + k].fill(Bin::EMPTY);
         }
-        for p in chunk {
-            let c: f32x4 = bytemuck::cast(p.centroid2());
-            let idx = ((c - lo) * scale).min(top).max(f32x4::ZERO).fast_trunc_int().to_array();
+        let mut pairs = chunk.chunks_exact(2);
+        for pair in &mut pairs {
+            let (p, q) = (&pair[0], &pair[1]);
+            let (ip, iq) = (index(p), index(q));
             for a in 0..3 {
-                let bin = &mut bins[a * MAX_BINS + (idx[a] as usize & (MAX_BINS - 1))];
+                let bin = &mut bins[a * MAX_BINS + (ip[a] as usize & (MAX_BINS - 1))];
+                bin.bounds.grow(p.lower, p.upper);
+                bin.count += 1;
+                let bin = &mut bins2[a * MAX_BINS + (iq[a] as usize & (MAX_BINS - 1))];
+                bin.bounds.grow(q.lower, q.upper);
+                bin.count += 1;
+            }
+        }
+        for p in pairs.remainder() {
+            let ip = index(p);
+            for a in 0..3 {
+                let bin = &mut bins[a * MAX_BINS + (ip[a] as usize & (MAX_BINS - 1))];
                 bin.bounds.grow(p.lower, p.upper);
                 bin.count += 1;
             }
         }
+        for a in 0..3 {
+            for i in a * MAX_BINS..a * MAX_BINS + k {
+                bins[i].bounds = bins[i].bounds.union(&bins2[i].bounds);
+                bins[i].count += bins2[i].count;
+            }
+        }
     };
     if prims.len() < PARALLEL_BIN_THRESHOLD {
-        return bin_chunk(prims, bins);
+        return bin_chunk(prims, bins, bins2);
     }
     use rayon::prelude::*;
     let partial = prims
         .par_chunks(PARALLEL_BIN_THRESHOLD / 4)
         .map(|chunk| {
-            let mut b = vec![Bin::EMPTY; 3 * MAX_BINS];
-            bin_chunk(chunk, &mut b);
+            let (mut b, mut b2) = (vec![Bin::EMPTY; 3 * MAX_BINS], vec![Bin::EMPTY; 3 * MAX_BINS]);
+            bin_chunk(chunk, &mut b, &mut b2);
             b
         })
         .reduce_with(|mut a, b| {
