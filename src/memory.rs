@@ -86,6 +86,37 @@ pub fn available() -> Option<Available> {
     best
 }
 
+/// Asks the kernel to back `v`'s allocation (its whole capacity) with transparent huge pages,
+/// as Embree does with its build memory: a hint, so errors are ignored, and only the 2 MiB
+/// aligned part of buffers of 4 MiB or more is advised. Call it before the first write: the
+/// page faults of fresh memory then come 2 MiB at a time instead of 4 KiB. A no-op off Linux.
+//
+// On the builder's temporaries (primitive references, slots, binary nodes, leaf ids, collapse
+// plans), Intel Xeon (model 167), 2 threads, `raypack bench --build-runs 7 --against embree`,
+// three rounds at each of AVX-512 and AVX2, medians: the Stanford dragon's commit 0.166-0.177 s
+// before, 0.156-0.175 s after (Embree MEDIUM 0.156-0.207 s in the same runs); the 2M knot
+// 0.365-0.383 s before, 0.337-0.354 s after (Embree 0.335-0.346 s).
+pub fn advise_huge_pages<T>(v: &Vec<T>) {
+    #[cfg(target_os = "linux")]
+    {
+        const HUGE: usize = 2 << 20;
+        let bytes = v.capacity().saturating_mul(std::mem::size_of::<T>());
+        if bytes < 2 * HUGE {
+            return;
+        }
+        let start = (v.as_ptr() as usize).next_multiple_of(HUGE);
+        let end = (v.as_ptr() as usize + bytes) / HUGE * HUGE;
+        if end > start {
+            // SAFETY: [start, end) lies inside `v`'s allocation, which `v` owns for the
+            // duration of the call; MADV_HUGEPAGE changes how the kernel backs those pages,
+            // never their contents or their mapping.
+            unsafe { libc::madvise(start as *mut libc::c_void, end - start, libc::MADV_HUGEPAGE) };
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = v;
+}
+
 /// Bytes of a committed scene's geometry store: vertex positions and normals, indices,
 /// per-triangle materials and spheres (materials, lights and camera excluded).
 pub fn store_bytes(scene: &Scene) -> usize {

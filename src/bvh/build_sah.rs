@@ -302,6 +302,8 @@ pub fn build_bvh2_spatial(
         min_refs: opts.collapse.max_leaf_prims.max(opts.max_leaf_size),
     };
     let extra = (f64::from(budget.max(0.0)) * n as f64) as usize;
+    prims.reserve_exact(extra);
+    crate::memory::advise_huge_pages(&prims);
     prims.resize(n + extra, BuildPrim::new(Aabb::EMPTY, 0));
     let (mut slots, leaves) = build_slots_in(&mut prims, n, info, opts, first_of_second_kind, Some(&splitter));
     let prims = squeeze(&mut slots, &prims);
@@ -315,6 +317,7 @@ pub fn build_bvh2_spatial(
 /// collapse require.
 fn squeeze(slots: &mut [Slot], prims: &[BuildPrim]) -> Vec<BuildPrim> {
     let mut out = Vec::with_capacity(prims.len());
+    crate::memory::advise_huge_pages(&out);
     let mut stack = vec![0usize];
     while let Some(s) = stack.pop() {
         let slot = slots[s];
@@ -334,7 +337,10 @@ fn squeeze(slots: &mut [Slot], prims: &[BuildPrim]) -> Vec<BuildPrim> {
 /// writes to fresh memory, page faults included, are a large part of the cost).
 fn prim_ids(prims: &[BuildPrim]) -> Vec<u32> {
     use rayon::prelude::*;
-    prims.par_iter().map(|p| p.id()).collect()
+    let mut ids = Vec::with_capacity(prims.len());
+    crate::memory::advise_huge_pages(&ids);
+    prims.par_iter().map(|p| p.id()).collect_into_vec(&mut ids);
+    ids
 }
 
 /// A node in the reserved-range build array: a leaf's first primitive and count (`1 ..
@@ -378,6 +384,7 @@ fn build_slots_in(
     // subtree may end up holding. Zero-filled memory costs nothing until touched, and only
     // used slots are ever read.
     let mut slots: Vec<Slot> = bytemuck::zeroed_vec(2 * prims.len() - 1);
+    crate::memory::advise_huge_pages(&slots);
     let max_leaf = opts.max_leaf_size.clamp(1, INNER as usize - 1);
     // See `BuildQuality`: below High, every node of at most `max_leaf` primitives is a leaf.
     let leaf_at_most = if opts.quality == BuildQuality::High { 1 } else { max_leaf };
@@ -783,6 +790,7 @@ fn compact(slots: &[Slot], leaves: usize, prims: &[BuildPrim]) -> Vec<Bvh2Node> 
     // touches first (on a 20M-triangle mesh the page faults of the array are a second or
     // more). A binary tree has one inner node fewer than leaves.
     let mut nodes: Vec<Bvh2Node> = bytemuck::zeroed_vec(2 * leaves - 1);
+    crate::memory::advise_huge_pages(&nodes);
     let (root, rest) = nodes.split_first_mut().expect("a root");
     let (node, _, used) = compact_rec(slots, prims, 0, rest, 1);
     debug_assert_eq!(used, rest.len());

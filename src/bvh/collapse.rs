@@ -550,7 +550,10 @@ pub fn collapse_for<T: TriBlock>(
     // Allocated and first written in parallel (as the output arrays below are first written
     // by parallel tasks): for large meshes the page faults of fresh memory are a large part
     // of the cost.
-    let p = Planned { bvh2: &bvh2, first_sphere, plans: (0..m).into_par_iter().map(|_| AtomicU64::new(0)).collect() };
+    let mut plans = Vec::with_capacity(m);
+    crate::memory::advise_huge_pages(&plans);
+    (0..m).into_par_iter().map(|_| AtomicU64::new(0)).collect_into_vec(&mut plans);
+    let p = Planned { bvh2: &bvh2, first_sphere, plans };
     let mut out = Arrays { nodes: vec![Bvh8Node::EMPTY], tris: Vec::new(), spheres: Vec::new() };
     if bvh2.is_empty() {
         return out.into_bvh8(test);

@@ -329,14 +329,16 @@ impl Filtered {
     pub(crate) fn build(self, opts: &BuildOptions) -> Scene {
         let Filtered { triangles, spheres, materials, lights, camera } = self;
         let nt = triangles.len();
-        let mut prims: Vec<BuildPrim> = {
+        let mut prims: Vec<BuildPrim> = Vec::with_capacity(nt + spheres.len());
+        crate::memory::advise_huge_pages(&prims);
+        {
             use rayon::prelude::*;
             (0..nt)
                 .into_par_iter()
                 .map(|i| BuildPrim::new(triangles.bounds(i), i as u32))
                 .chain((0..spheres.len()).into_par_iter().map(|i| BuildPrim::new(spheres.bounds(i), (nt + i) as u32)))
-                .collect()
-        };
+                .collect_into_vec(&mut prims);
+        }
         let bounds = {
             use rayon::prelude::*;
             prims.par_iter().map(|p| p.bounds()).reduce(|| Aabb::EMPTY, |a, b| a.union(&b))
