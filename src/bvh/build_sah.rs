@@ -639,9 +639,12 @@ fn bin_prims(prims: &[BuildPrim], maps: &[(f32, f32); 3], k: usize, bins: &mut [
     let lo = f32x4::new([maps[0].0, maps[1].0, maps[2].0, 0.0]);
     let scale = f32x4::new([maps[0].1, maps[1].1, maps[2].1, 0.0]);
     let top = f32x4::splat((k - 1) as f32);
+    // `fast_min`/`fast_max` (one instruction each; a NaN lane would take `top`, still a bin)
+    // rather than the NaN-propagating forms: 3% of a commit on one CPU (2M knot 0.670-0.687
+    // -> 0.648-0.665 s, dragon 0.305-0.313 -> 0.295-0.303 s, Intel Xeon model 167).
     let index = |p: &BuildPrim| {
         let c: f32x4 = bytemuck::cast(p.centroid2());
-        ((c - lo) * scale).min(top).max(f32x4::ZERO).fast_trunc_int().to_array()
+        ((c - lo) * scale).fast_min(top).fast_max(f32x4::ZERO).fast_trunc_int().to_array()
     };
     // Even and odd primitives go to two sets of bins, merged at the end: neighbours in a
     // mesh mostly fall into the same bins, and one set would chain every update to the
