@@ -3,7 +3,7 @@
 //! `sampler.cpp`. Directions are in a local frame whose `+z` is the surface normal.
 
 use crate::math::Vec3;
-use std::f32::consts::{FRAC_1_PI, FRAC_PI_2, FRAC_PI_4, PI, TAU};
+use std::f32::consts::{FRAC_1_PI, FRAC_PI_4, PI, TAU};
 
 /// Uniform direction on the `z >= 0` hemisphere; density [`UNIFORM_HEMISPHERE_PDF`].
 #[inline]
@@ -36,8 +36,32 @@ pub fn concentric_disk(u: (f32, f32)) -> (f32, f32) {
     if a == 0.0 && b == 0.0 {
         return (0.0, 0.0);
     }
-    let (r, theta) = if a.abs() > b.abs() { (a, FRAC_PI_4 * (b / a)) } else { (b, FRAC_PI_2 - FRAC_PI_4 * (a / b)) };
-    (r * theta.cos(), r * theta.sin())
+    // θ = π/4 · b/a, or π/2 − π/4 · a/b (whose cosine and sine are the sine and cosine of
+    // π/4 · a/b): both from one angle in [−π/4, π/4].
+    if a.abs() > b.abs() {
+        let (sin, cos) = sin_cos_quarter(FRAC_PI_4 * (b / a));
+        (a * cos, a * sin)
+    } else {
+        let (sin, cos) = sin_cos_quarter(FRAC_PI_4 * (a / b));
+        (b * sin, b * cos)
+    }
+}
+
+/// `(sin x, cos x)` for `|x| <= π/4` by their Taylor polynomials to x⁹ and x¹⁰ (truncation
+/// error below 3e-9 there, so the result is within about 2 ulp of the exact values): on this
+/// interval, several times cheaper than the library's `sin_cos`, which a cosine-weighted
+/// bounce otherwise pays for at every diffuse hit.
+//
+// `tools/bench-render.py --rounds 3 --spp 64 -t 1 -m 5`, Intel Xeon (model 167), medians, M samples/s:
+// CS184 CBbunny 4.09 -> 4.18 (AVX-512), 4.04 -> 4.11 (AVX2); Stanford dragon 7.48 -> 7.53, 7.71 -> 7.67.
+#[inline]
+pub fn sin_cos_quarter(x: f32) -> (f32, f32) {
+    debug_assert!(x.abs() <= FRAC_PI_4 * (1.0 + 1e-6) || !x.is_finite());
+    let x2 = x * x;
+    let sin = x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362_880.0)))));
+    let cos =
+        1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40_320.0 + x2 * (-1.0 / 3_628_800.0)))));
+    (sin, cos)
 }
 
 /// Cosine-weighted direction on the `z >= 0` hemisphere (Malley's method); density
@@ -82,6 +106,37 @@ pub fn uniform_triangle(u: (f32, f32)) -> (f32, f32) {
 mod tests {
     use super::*;
     use crate::render::sampler::Rng;
+
+    #[test]
+    fn quarter_sin_cos_is_within_rounding_of_the_exact_values() {
+        let mut worst = 0.0f64;
+        for i in -100_000..=100_000 {
+            let x = FRAC_PI_4 * i as f32 / 100_000.0;
+            let (s, c) = sin_cos_quarter(x);
+            let (es, ec) = (x as f64).sin_cos();
+            worst = worst.max((s as f64 - es).abs()).max((c as f64 - ec).abs());
+        }
+        // 2 ulp of 1.0 (the largest value either takes).
+        assert!(worst <= 2.0 * f32::EPSILON as f64, "worst error {worst:e}");
+    }
+
+    #[test]
+    fn concentric_disk_matches_the_angle_form() {
+        let mut rng = Rng::new(3, 7);
+        for _ in 0..100_000 {
+            let u = (rng.next_f32(), rng.next_f32());
+            let (a, b) = (2.0 * u.0 as f64 - 1.0, 2.0 * u.1 as f64 - 1.0);
+            let (r, theta) = if a.abs() > b.abs() {
+                (a, std::f64::consts::FRAC_PI_4 * (b / a))
+            } else {
+                (b, std::f64::consts::FRAC_PI_2 - std::f64::consts::FRAC_PI_4 * (a / b))
+            };
+            let (x, y) = concentric_disk(u);
+            assert!((x as f64 - r * theta.cos()).abs() < 1e-6 && (y as f64 - r * theta.sin()).abs() < 1e-6, "{u:?}");
+            assert!(x * x + y * y <= 1.0 + 4.0 * f32::EPSILON);
+        }
+        assert_eq!(concentric_disk((0.5, 0.5)), (0.0, 0.0));
+    }
 
     /// Monte Carlo check that a warp's density is right: the mean of `g(w) / pdf(w)` over
     /// its samples estimates the integral of `g` over the warp's support.
