@@ -307,14 +307,16 @@ impl<V: Lanes> PacketRays<V> {
 }
 
 /// The switch threshold of packets without a frustum (direction signs that differ): `3K/8`
-/// rays (6 of 16, 3 of 8). Coherent packets keep [`crate::bvh::queries::HYBRID_THRESHOLD`].
+/// rays (6 of 16, 3 of 8), except 16-lane packets on AVX-512, which go on alone at 4
+/// ([`IsaLanes::INCOHERENT_THRESHOLD_16`]). Coherent packets keep
+/// [`crate::bvh::queries::HYBRID_THRESHOLD`].
 //
 // Measured on the Stanford dragon's diffuse bounces (137k rays, Ice Lake-SP, AVX2, 16-ray
 // stream, 1 thread, best of 12 interleaved 0.1 s runs, Mrays/s): threshold 1 / 3 / 5 / 8 /
 // 12 = 1.85 / 2.19 / 2.37 / 2.21 / 2.10 (medians 1.78 / 1.88 / 2.07 / 2.11 / 1.95).
 #[inline(always)]
-pub fn incoherent_threshold<V: Lanes>() -> usize {
-    3 * V::LANES / 8
+pub fn incoherent_threshold<V: Lanes, I: IsaLanes>() -> usize {
+    if V::LANES == 16 { I::INCOHERENT_THRESHOLD_16 } else { 3 * V::LANES / 8 }
 }
 
 /// Hybrid closest-hit traversal of the active lanes of `rays`, in ISA `I` with triangle
@@ -343,7 +345,7 @@ pub fn intersect_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C
     let frustum = Frustum::<I::F8>::new(std::slice::from_ref(rays));
     // Rays whose direction signs differ (no frustum) are incoherent: they split up early, so
     // they go on alone sooner (Embree's incoherent switch threshold is higher too).
-    let threshold = if frustum.is_none() { threshold.max(incoherent_threshold::<V>()) } else { threshold };
+    let threshold = if frustum.is_none() { threshold.max(incoherent_threshold::<V, I>()) } else { threshold };
     let inf = V::splat(f32::INFINITY);
     let mut refs = [const { MaybeUninit::<NodeRef>::uninit() }; BVH8_STACK];
     let mut masks = [const { MaybeUninit::<u32>::uninit() }; BVH8_STACK];

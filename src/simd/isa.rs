@@ -167,6 +167,10 @@ pub trait IsaLanes: Copy + Send + Sync + 'static {
     /// The packet lanes of the stream queries ([`crate::Scene::intersect_batch`] and kin):
     /// `F16` or `F8`, whichever traces faster on this tier (see [`crate::bvh::queries`]).
     type Stream: Lanes;
+    /// How few of a 16-ray packet's rays without a common direction octant still want a
+    /// subtree when they finish it one by one
+    /// ([`crate::bvh::traverse_packet::incoherent_threshold`]).
+    const INCOHERENT_THRESHOLD_16: usize;
 }
 
 /// The baseline tier's lanes (`wide`'s types). Also usable directly: it needs no CPU check.
@@ -179,6 +183,7 @@ impl IsaLanes for Baseline {
     type F8 = F32x8;
     type F16 = F32x16;
     type Stream = F32x16;
+    const INCOHERENT_THRESHOLD_16: usize = 6;
 }
 
 /// The AVX2 tier's lanes.
@@ -193,6 +198,7 @@ impl IsaLanes for Avx2 {
     type F8 = super::x86::M256;
     type F16 = super::x86::Pair<super::x86::M256>;
     type Stream = super::x86::Pair<super::x86::M256>;
+    const INCOHERENT_THRESHOLD_16: usize = 6;
 }
 
 /// The AVX-512 tier's lanes.
@@ -207,6 +213,9 @@ impl IsaLanes for Avx512 {
     type F8 = super::x86::M256;
     type F16 = super::x86::M512;
     type Stream = super::x86::M512;
+    // 4 against 6: diffuse streams 1-2.5% faster on all four scenes measured, AVX2 no
+    // better with 4 (PERFORMANCE.md, "Streams").
+    const INCOHERENT_THRESHOLD_16: usize = 4;
 }
 
 /// A kernel invocation, run with the lanes of one ISA tier. `run` and everything it calls
