@@ -59,7 +59,8 @@ pub struct BuildOptions {
     /// Most primitives in a leaf (at least 1). Larger nodes are always split; smaller ones
     /// are leaves below [`BuildQuality::High`].
     pub max_leaf_size: usize,
-    /// SAH bins per axis (clamped to `16 ..= 256`); `None` picks from `quality`.
+    /// SAH bins per axis of the largest nodes (clamped to `16 ..= 256`; smaller nodes use
+    /// fewer, see [`BuildOptions::bin_count`]); `None` picks from `quality`.
     pub bins: Option<usize>,
     /// Effort knob.
     pub quality: BuildQuality,
@@ -100,7 +101,9 @@ impl Default for BuildOptions {
 }
 
 impl BuildOptions {
-    /// The number of bins actually used.
+    /// The most bins per axis a node is binned into. Smaller nodes use fewer: `4 + n/20` for
+    /// a node of `n` primitives below [`BuildQuality::High`] (Embree's rule), `max(n, 8)` at
+    /// High.
     pub fn bin_count(&self) -> usize {
         let b = self.bins.unwrap_or(match self.quality {
             BuildQuality::Fast => 16,
