@@ -90,6 +90,8 @@ pub fn available() -> Option<Available> {
 /// as Embree does with its build memory: a hint, so errors are ignored, and only the 2 MiB
 /// aligned part of buffers of 4 MiB or more is advised. Call it before the first write: the
 /// page faults of fresh memory then come 2 MiB at a time instead of 4 KiB. A no-op off Linux.
+/// (Arrays that outlive the build are [`crate::bvh::BvhArray`]s, whose `zeroed` maps and
+/// advises their own memory.)
 //
 // On the builder's temporaries (primitive references, slots, binary nodes, leaf ids, collapse
 // plans), Intel Xeon (model 167), 2 threads, `raypack bench --build-runs 7 --against embree`,
@@ -115,6 +117,13 @@ pub(crate) fn advise_huge_pages<T>(v: &Vec<T>) {
     }
     #[cfg(not(target_os = "linux"))]
     let _ = v;
+}
+
+/// An empty `Vec` with room for `capacity` elements, advised as [`advise_huge_pages`] says.
+pub(crate) fn huge_page_vec<T>(capacity: usize) -> Vec<T> {
+    let v = Vec::with_capacity(capacity);
+    advise_huge_pages(&v);
+    v
 }
 
 /// Bytes of a committed scene's geometry store: vertex positions and normals, indices,

@@ -319,8 +319,7 @@ pub fn build_bvh2_spatial(
 /// range: afterwards every subtree's references are contiguous, as [`compact`] and the
 /// collapse require.
 fn squeeze(slots: &mut [Slot], prims: &[BuildPrim]) -> Vec<BuildPrim> {
-    let mut out = Vec::with_capacity(prims.len());
-    crate::memory::advise_huge_pages(&out);
+    let mut out = crate::memory::huge_page_vec(prims.len());
     let mut stack = vec![0usize];
     while let Some(s) = stack.pop() {
         let slot = slots[s];
@@ -340,8 +339,7 @@ fn squeeze(slots: &mut [Slot], prims: &[BuildPrim]) -> Vec<BuildPrim> {
 /// writes to fresh memory, page faults included, are a large part of the cost).
 fn prim_ids(prims: &[BuildPrim]) -> Vec<u32> {
     use rayon::prelude::*;
-    let mut ids = Vec::with_capacity(prims.len());
-    crate::memory::advise_huge_pages(&ids);
+    let mut ids = crate::memory::huge_page_vec(prims.len());
     prims.par_iter().map(|p| p.id()).collect_into_vec(&mut ids);
     ids
 }
@@ -582,6 +580,22 @@ struct Bin {
 
 impl Bin {
     const EMPTY: Bin = Bin { bounds: Box4::EMPTY, count: 0 };
+
+    #[inline(always)]
+    fn add(&mut self, p: &BuildPrim) {
+        self.bounds.grow(p.lower, p.upper);
+        self.count += 1;
+    }
+}
+
+/// Adds the first `k` bins of each axis of `from` to those of `into` (exact: unions and sums).
+fn merge_bins(into: &mut [Bin], from: &[Bin], k: usize) {
+    for axis in 0..3 {
+        for i in axis * MAX_BINS..axis * MAX_BINS + k {
+            into[i].bounds = into[i].bounds.union(&from[i].bounds);
+            into[i].count += from[i].count;
+        }
+    }
 }
 
 /// Per-task scratch memory of the builder, reused for every node the task splits (only the
@@ -661,33 +675,23 @@ fn bin_prims(prims: &[BuildPrim], maps: &[(f32, f32); 3], k: usize, bins: &mut [
             bins[a * MAX_BINS..a * MAX_BINS + k].fill(Bin::EMPTY);
             bins2[a * MAX_BINS..a * MAX_BINS + k].fill(Bin::EMPTY);
         }
+        // Primitive `p` into bin `idx[a]` of each axis `a` of `bins`.
+        let add = |bins: &mut [Bin; 3 * MAX_BINS], idx: [i32; 4], p: &BuildPrim| {
+            for a in 0..3 {
+                bins[a * MAX_BINS + (idx[a] as usize & (MAX_BINS - 1))].add(p);
+            }
+        };
         let mut pairs = chunk.chunks_exact(2);
         for pair in &mut pairs {
             let (p, q) = (&pair[0], &pair[1]);
             let (ip, iq) = (index(p), index(q));
-            for a in 0..3 {
-                let bin = &mut bins[a * MAX_BINS + (ip[a] as usize & (MAX_BINS - 1))];
-                bin.bounds.grow(p.lower, p.upper);
-                bin.count += 1;
-                let bin = &mut bins2[a * MAX_BINS + (iq[a] as usize & (MAX_BINS - 1))];
-                bin.bounds.grow(q.lower, q.upper);
-                bin.count += 1;
-            }
+            add(bins, ip, p);
+            add(bins2, iq, q);
         }
         for p in pairs.remainder() {
-            let ip = index(p);
-            for a in 0..3 {
-                let bin = &mut bins[a * MAX_BINS + (ip[a] as usize & (MAX_BINS - 1))];
-                bin.bounds.grow(p.lower, p.upper);
-                bin.count += 1;
-            }
+            add(bins, index(p), p);
         }
-        for a in 0..3 {
-            for i in a * MAX_BINS..a * MAX_BINS + k {
-                bins[i].bounds = bins[i].bounds.union(&bins2[i].bounds);
-                bins[i].count += bins2[i].count;
-            }
-        }
+        merge_bins(bins, bins2, k);
     };
     if prims.len() < PARALLEL_BIN_THRESHOLD {
         return bin_chunk(prims, bins, bins2);
@@ -701,12 +705,7 @@ fn bin_prims(prims: &[BuildPrim], maps: &[(f32, f32); 3], k: usize, bins: &mut [
             b
         })
         .reduce_with(|mut a, b| {
-            for axis in 0..3 {
-                for i in axis * MAX_BINS..axis * MAX_BINS + k {
-                    a[i].bounds = a[i].bounds.union(&b[i].bounds);
-                    a[i].count += b[i].count;
-                }
-            }
+            merge_bins(&mut a, &b, k);
             a
         })
         .expect("non-empty");

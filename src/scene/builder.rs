@@ -329,8 +329,7 @@ impl Filtered {
     pub(crate) fn build(self, opts: &BuildOptions) -> Scene {
         let Filtered { triangles, spheres, materials, lights, camera } = self;
         let nt = triangles.len();
-        let mut prims: Vec<BuildPrim> = Vec::with_capacity(nt + spheres.len());
-        crate::memory::advise_huge_pages(&prims);
+        let mut prims: Vec<BuildPrim> = crate::memory::huge_page_vec(nt + spheres.len());
         {
             use rayon::prelude::*;
             (0..nt)

@@ -213,7 +213,7 @@ impl IsaLanes for Avx512 {
     type F8 = super::x86::M256;
     type F16 = super::x86::M512;
     type Stream = super::x86::M512;
-    // 4 against 6: diffuse streams 1-2.5% faster on all four scenes measured, AVX2 no
+    // 4 against 6: diffuse streams 1-4% faster on all four scenes measured, AVX2 no
     // better with 4 (PERFORMANCE.md, "Streams").
     const INCOHERENT_THRESHOLD_16: usize = 4;
 }
