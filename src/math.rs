@@ -38,6 +38,12 @@ impl Aabb {
         Self { min: p, max: p }
     }
 
+    /// The smallest box holding the three corners of a triangle.
+    #[inline]
+    pub fn of_triangle([a, b, c]: [Vec3; 3]) -> Self {
+        Self { min: a.min(b).min(c), max: a.max(b).max(c) }
+    }
+
     /// True when `min <= max` on every axis.
     #[inline]
     pub fn is_valid(&self) -> bool {

@@ -265,17 +265,24 @@ impl PrimInfo {
 /// Builds a binary BVH over `prims` (reordered in place). Primitive ids in the leaves refer
 /// to `BuildPrim::id`. An empty input gives a tree with one empty leaf.
 pub fn build_bvh2(prims: &mut [BuildPrim], opts: &BuildOptions) -> Bvh2 {
-    build_bvh2_kinds(prims, opts, u32::MAX)
+    build_bvh2_kinds(prims, opts, u32::MAX).0
 }
 
 /// [`build_bvh2`] for a mix of two primitive kinds: ids below `first_of_second_kind` are
 /// the first kind (triangles), the rest the second (spheres). No leaf mixes the kinds: a
 /// leaf that would is split into one leaf per kind under an inner node, so that leaf blocks,
 /// which hold one kind, can be filled straight from the binary leaves.
-pub fn build_bvh2_kinds(prims: &mut [BuildPrim], opts: &BuildOptions, first_of_second_kind: u32) -> Bvh2 {
-    let (slots, leaves) = build_slots(prims, opts, first_of_second_kind);
+///
+/// Also returns the union of the primitives' boxes, exactly (the root's box is padded:
+/// [`pad_outward`]), which the builder finds on its way ([`Aabb::EMPTY`] for no primitive).
+pub fn build_bvh2_kinds(prims: &mut [BuildPrim], opts: &BuildOptions, first_of_second_kind: u32) -> (Bvh2, Aabb) {
+    if prims.is_empty() {
+        return (Bvh2 { nodes: compact(&[], 0, prims), prim_ids: Vec::new() }, Aabb::EMPTY);
+    }
+    let info = PrimInfo::of_par(prims);
+    let (slots, leaves) = build_slots(prims, prims.len(), info, opts, first_of_second_kind, None);
     let nodes = compact(&slots, leaves, prims);
-    Bvh2 { nodes, prim_ids: prim_ids(prims) }
+    (Bvh2 { nodes, prim_ids: prim_ids(prims) }, info.bounds.aabb())
 }
 
 /// [`build_bvh2_kinds`] with the spatial splits of [`crate::bvh::spatial`]: where
@@ -291,7 +298,7 @@ pub fn build_bvh2_spatial(
     first_of_second_kind: u32,
     budget: f32,
     triangle: &(dyn Fn(u32) -> [Vec3; 3] + Sync),
-) -> Bvh2 {
+) -> (Bvh2, Aabb) {
     let n = prims.len();
     if n == 0 {
         return build_bvh2_kinds(&mut prims, opts, first_of_second_kind);
@@ -308,10 +315,10 @@ pub fn build_bvh2_spatial(
     prims.reserve_exact(extra);
     crate::memory::advise_huge_pages(&prims);
     prims.resize(n + extra, BuildPrim::new(Aabb::EMPTY, 0));
-    let (mut slots, leaves) = build_slots_in(&mut prims, n, info, opts, first_of_second_kind, Some(&splitter));
+    let (mut slots, leaves) = build_slots(&mut prims, n, info, opts, first_of_second_kind, Some(&splitter));
     let prims = squeeze(&mut slots, &prims);
     let nodes = compact(&slots, leaves, &prims);
-    Bvh2 { nodes, prim_ids: prim_ids(&prims) }
+    (Bvh2 { nodes, prim_ids: prim_ids(&prims) }, info.bounds.aabb())
 }
 
 /// Gathers the references of the leaves of `slots` in depth-first order, left first,
@@ -361,19 +368,11 @@ struct Slot {
 /// The flag of an inner [`Slot`]'s `count`.
 const INNER: u32 = 1 << 31;
 
-/// The binned SAH build into the reserved-range slots that [`compact`] renumbers.
-/// Returns the slots and the number of leaves.
-fn build_slots(prims: &mut [BuildPrim], opts: &BuildOptions, first_of_second_kind: u32) -> (Vec<Slot>, usize) {
-    if prims.is_empty() {
-        return (Vec::new(), 0);
-    }
-    let info = PrimInfo::of_par(prims);
-    build_slots_in(prims, prims.len(), info, opts, first_of_second_kind, None)
-}
-
-/// [`build_slots`] over the first `n` of `prims` (bounds `info`), the rest being free space
-/// for the references spatial splits add (with `splitter`).
-fn build_slots_in(
+/// The binned SAH build into the reserved-range slots that [`compact`] renumbers, over the
+/// first `n` (at least one) of `prims` (bounds `info`), the rest being free space for the
+/// references spatial splits add (with `splitter`). Returns the slots and the number of
+/// leaves.
+fn build_slots(
     prims: &mut [BuildPrim],
     n: usize,
     info: PrimInfo,

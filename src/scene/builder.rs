@@ -226,8 +226,9 @@ impl SceneBuilder {
     /// Drops untraceable primitives, builds the acceleration structure and returns the
     /// scene with a report of what was kept.
     pub fn commit(self, opts: &BuildOptions) -> (Scene, CommitReport) {
-        let (kept, report) = self.filter();
-        (kept.build(opts), report)
+        let mut prims = Vec::new();
+        let (kept, report) = self.filter_into(Some(&mut prims));
+        (kept.build_over(prims, opts), report)
     }
 
     /// The triangles [`SceneBuilder::commit`] keeps, and how many spheres it keeps, without
@@ -240,6 +241,12 @@ impl SceneBuilder {
 
     /// The first half of [`SceneBuilder::commit`]: drops the primitives that cannot be traced.
     pub(crate) fn filter(self) -> (Filtered, CommitReport) {
+        self.filter_into(None)
+    }
+
+    /// [`SceneBuilder::filter`], also making the kept primitives' build references
+    /// ([`Filtered::build_prims`]) into `prims` when asked, in the same pass over the vertices.
+    fn filter_into(self, mut prims: Option<&mut Vec<BuildPrim>>) -> (Filtered, CommitReport) {
         let mut report = CommitReport::default();
         let SceneBuilder { mut triangles, spheres: in_spheres, mut materials, lights, camera, .. } = self;
         if materials.is_empty() {
@@ -255,23 +262,32 @@ impl SceneBuilder {
             NonFinite,
             Degenerate,
         }
-        let verdicts: Vec<Verdict> = {
+        let verdict = |[a, b, c]: [Vec3; 3]| {
+            if !(ok(a) && ok(b) && ok(c)) {
+                Verdict::NonFinite
+            } else if is_degenerate(a, b, c) {
+                Verdict::Degenerate
+            } else {
+                Verdict::Keep
+            }
+        };
+        let mut verdicts: Vec<Verdict> = Vec::new();
+        {
             use rayon::prelude::*;
             let t = &triangles;
-            (0..t.indices.len())
-                .into_par_iter()
-                .map(|i| {
-                    let [a, b, c] = t.vertices(i);
-                    if !(ok(a) && ok(b) && ok(c)) {
-                        Verdict::NonFinite
-                    } else if is_degenerate(a, b, c) {
-                        Verdict::Degenerate
-                    } else {
-                        Verdict::Keep
-                    }
-                })
-                .collect()
-        };
+            let all = (0..t.indices.len()).into_par_iter();
+            match prims.as_deref_mut() {
+                None => all.map(|i| verdict(t.vertices(i))).collect_into_vec(&mut verdicts),
+                Some(prims) => {
+                    *prims = crate::memory::huge_page_vec(t.len() + in_spheres.len());
+                    all.map(|i| {
+                        let v = t.vertices(i);
+                        (verdict(v), BuildPrim::new(Aabb::of_triangle(v), i as u32))
+                    })
+                    .unzip_into_vecs(&mut verdicts, prims);
+                }
+            }
+        }
         // Triangles before the first dropped one stay where they are (usually all of them).
         let first_dropped = verdicts.iter().position(|&v| v != Verdict::Keep).unwrap_or(verdicts.len());
         let mut keep = first_dropped;
@@ -282,12 +298,19 @@ impl SceneBuilder {
                 Verdict::Keep => {
                     triangles.indices[keep] = triangles.indices[i];
                     triangles.material[keep] = triangles.material[i];
+                    if let Some(prims) = prims.as_deref_mut() {
+                        let b = prims[i].bounds();
+                        prims[keep] = BuildPrim::new(b, keep as u32);
+                    }
                     keep += 1;
                 }
             }
         }
         triangles.indices.truncate(keep);
         triangles.material.truncate(keep);
+        if let Some(prims) = prims.as_deref_mut() {
+            prims.truncate(keep);
+        }
 
         let mut spheres = SpheresSoa::default();
         for i in 0..in_spheres.len() {
@@ -308,6 +331,10 @@ impl SceneBuilder {
         }
         report.triangles = triangles.len();
         report.spheres = spheres.len();
+        if let Some(prims) = prims {
+            let nt = triangles.len();
+            prims.extend((0..spheres.len()).map(|i| BuildPrim::new(spheres.bounds(i), (nt + i) as u32)));
+        }
         (Filtered { triangles, spheres, materials, lights, camera }, report)
     }
 }
@@ -327,31 +354,41 @@ impl Filtered {
     /// Builds the binary BVH and collapses it into the 8-wide one (keeping the binary one
     /// only with [`BuildOptions::keep_bvh2`]).
     pub(crate) fn build(self, opts: &BuildOptions) -> Scene {
-        let Filtered { triangles, spheres, materials, lights, camera } = self;
+        let prims = self.build_prims();
+        self.build_over(prims, opts)
+    }
+
+    /// The build references of the primitives: triangles first (id = index), then spheres
+    /// (id = triangle count + index).
+    fn build_prims(&self) -> Vec<BuildPrim> {
+        let (triangles, spheres) = (&self.triangles, &self.spheres);
         let nt = triangles.len();
         let mut prims: Vec<BuildPrim> = crate::memory::huge_page_vec(nt + spheres.len());
-        {
-            use rayon::prelude::*;
-            (0..nt)
-                .into_par_iter()
-                .map(|i| BuildPrim::new(triangles.bounds(i), i as u32))
-                .chain((0..spheres.len()).into_par_iter().map(|i| BuildPrim::new(spheres.bounds(i), (nt + i) as u32)))
-                .collect_into_vec(&mut prims);
-        }
-        let bounds = {
-            use rayon::prelude::*;
-            prims.par_iter().map(|p| p.bounds()).reduce(|| Aabb::EMPTY, |a, b| a.union(&b))
-        };
+        use rayon::prelude::*;
+        (0..nt)
+            .into_par_iter()
+            .map(|i| BuildPrim::new(triangles.bounds(i), i as u32))
+            .chain((0..spheres.len()).into_par_iter().map(|i| BuildPrim::new(spheres.bounds(i), (nt + i) as u32)))
+            .collect_into_vec(&mut prims);
+        prims
+    }
+
+    /// [`Filtered::build`] over `prims`, [`Filtered::build_prims`] made by the caller.
+    fn build_over(self, mut prims: Vec<BuildPrim>, opts: &BuildOptions) -> Scene {
+        let Filtered { triangles, spheres, materials, lights, camera } = self;
+        let nt = triangles.len();
+        debug_assert_eq!(prims.len(), nt + spheres.len());
         // High quality cuts triangles that overlap badly (spatial splits, `bvh::spatial`).
         let spatial =
             opts.quality == BuildQuality::High && opts.spatial_split_budget > 0.0 && opts.split == SplitMethod::Sah;
-        let bvh2 = if spatial {
+        // The builder finds the union of the primitives' boxes, the scene's bounds.
+        let (bvh2, bounds) = if spatial {
             let corners = |id: u32| triangles.vertices(id as usize);
             build_bvh2_spatial(prims, opts, nt as u32, opts.spatial_split_budget, &corners)
         } else {
-            let bvh2 = build_bvh2_kinds(&mut prims, opts, nt as u32);
+            let built = build_bvh2_kinds(&mut prims, opts, nt as u32);
             drop(prims);
-            bvh2
+            built
         };
         let mut scene = Scene {
             triangles,
@@ -432,6 +469,52 @@ mod tests {
             checked += 1;
         }
         assert!(degenerate > 10_000 && checked - degenerate > 10_000, "{degenerate} of {checked}");
+    }
+
+    #[test]
+    fn commit_finds_the_exact_bounds_and_renumbers_kept_primitives_at_every_quality() {
+        let mut seed = 7u64;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+        };
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::default());
+        // Long thin triangles, which High quality's spatial splits cut, every tenth of them
+        // degenerate (dropped, so the ones after it move), and a few spheres.
+        let mut points = Vec::new();
+        for i in 0..3000 {
+            let a = Vec3::new(rnd(), rnd(), rnd()) * 20.0;
+            let b = a + Vec3::new(rnd(), rnd(), rnd()) * 15.0;
+            let c = if i % 10 == 0 { a } else { a + Vec3::new(rnd(), rnd(), rnd()) * 0.1 };
+            points.extend([a, b, c]);
+        }
+        let tris: Vec<[u32; 3]> = (0..points.len() as u32 / 3).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+        b.add_mesh(&points, &tris, m).unwrap();
+        for _ in 0..20 {
+            b.add_sphere(Vec3::new(rnd(), rnd(), rnd()) * 30.0, 1.0 + rnd(), m).unwrap();
+        }
+        for quality in [BuildQuality::Fast, BuildQuality::Medium, BuildQuality::High] {
+            let (scene, _) = b.clone().commit(&BuildOptions { quality, ..BuildOptions::default() });
+            let mut union = Aabb::EMPTY;
+            for i in 0..scene.triangles.len() {
+                union = union.union(&scene.triangles.bounds(i));
+            }
+            for i in 0..scene.spheres.len() {
+                union = union.union(&scene.spheres.bounds(i));
+            }
+            assert_eq!(scene.bounds(), union, "{quality:?}");
+            assert_eq!(scene.triangles.len(), 2700);
+            // The tree refers to the kept primitives by their new indices.
+            for _ in 0..2000 {
+                let o = Vec3::new(rnd(), rnd(), rnd()) * 60.0;
+                let ray = crate::Ray::new(o, (Vec3::new(rnd(), rnd(), rnd()) * 20.0 - o).normalize());
+                let (bvh, brute) = (scene.intersect1(&ray), scene.intersect1_brute_force(&ray));
+                assert_eq!((bvh.prim, bvh.t), (brute.prim, brute.t), "{quality:?} {ray:?}");
+            }
+        }
+        let (empty, _) = SceneBuilder::new().commit(&BuildOptions::default());
+        assert_eq!(empty.bounds(), Aabb::EMPTY);
     }
 
     #[test]

@@ -73,11 +73,7 @@ impl TrianglesSoa {
     /// Bounds of triangle `i`.
     #[inline]
     pub fn bounds(&self, i: usize) -> Aabb {
-        let [a, b, c] = self.vertices(i);
-        let mut bb = Aabb::from_point(a);
-        bb.grow(b);
-        bb.grow(c);
-        bb
+        Aabb::of_triangle(self.vertices(i))
     }
 }
 
