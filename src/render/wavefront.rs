@@ -4,7 +4,8 @@
 //! A batch (the camera samples of one pass over a tile) goes through:
 //! 1. *generate*: the caller queues one path and its camera ray per sample
 //!    ([`Wavefront::push_path`], [`Wavefront::push_camera_ray`]);
-//! 2. *trace*: the camera rays as one closest-hit stream;
+//! 2. *trace*: the camera rays as one closest-hit stream; the paths whose ray left the scene
+//!    end there, and the others go on in waves of 1024 paths;
 //! 3. *shade*: each hit adds its emission, queues its direct-lighting samples (shadow rays, or
 //!    hemisphere rays under `-H`), samples its BSDF and plays Russian roulette
 //!    ([`Integrator::shade`]), writing the continuation ray in place of the ray shaded;
@@ -160,8 +161,24 @@ impl Wavefront {
             clock.lap(&mut times.shade);
             return;
         }
+        // Camera rays that leave the scene end their paths here (a miss queues nothing), so
+        // that the waves hold only paths that go on.
+        let mut n = 0;
+        for k in 0..c.rays.len() {
+            let (ray, hit, id) = (c.rays[k], c.hits[k], c.owner[k]);
+            if hit.is_hit() {
+                (c.rays[n], c.hits[n], c.owner[n]) = (ray, hit, id);
+                n += 1;
+            } else {
+                let ends = integrator.shade(&mut self.paths[id as usize], &ray, &hit, &MISSED, &mut self.direct, id);
+                debug_assert!(ends.is_none());
+            }
+        }
+        c.rays.truncate(n);
+        c.hits.truncate(n);
+        c.owner.truncate(n);
+        clock.lap(&mut times.shade);
         // The paths go on in waves of WAVE_PATHS, whose queues stay in the cache.
-        let n = c.rays.len();
         for start in (0..n).step_by(WAVE_PATHS) {
             let end = (start + WAVE_PATHS).min(n);
             let (c, q) = (&self.camera, &mut self.queue);
