@@ -163,20 +163,12 @@ impl Wavefront {
         }
         // Camera rays that leave the scene end their paths here (a miss queues nothing), so
         // that the waves hold only paths that go on.
-        let mut n = 0;
-        for k in 0..c.rays.len() {
-            let (ray, hit, id) = (c.rays[k], c.hits[k], c.owner[k]);
-            if hit.is_hit() {
-                (c.rays[n], c.hits[n], c.owner[n]) = (ray, hit, id);
-                n += 1;
-            } else {
-                let ends = integrator.shade(&mut self.paths[id as usize], &ray, &hit, &MISSED, &mut self.direct, id);
-                debug_assert!(ends.is_none());
-            }
-        }
-        c.rays.truncate(n);
-        c.hits.truncate(n);
-        c.owner.truncate(n);
+        let (paths, direct) = (&mut self.paths, &mut self.direct);
+        c.retain_hits(|ray, hit, id| {
+            let ends = integrator.shade(&mut paths[id as usize], ray, hit, &MISSED, direct, id);
+            debug_assert!(ends.is_none());
+        });
+        let n = c.len();
         clock.lap(&mut times.shade);
         // The paths go on in waves of WAVE_PATHS, whose queues stay in the cache.
         for start in (0..n).step_by(WAVE_PATHS) {
