@@ -2,8 +2,8 @@
 //! `PathIntegrator` without multiple importance sampling).
 //!
 //! A path advances one bounce at a time, in two steps the wavefront ([`super::wavefront`])
-//! runs over a whole batch of paths: [`Integrator::shade`] and [`Integrator::scatter`]; the
-//! rays they ask for are traced between the steps, many paths' at once. At each non-specular
+//! takes for each path of a batch in turn: [`Integrator::shade`] and [`Integrator::scatter`];
+//! the rays they ask for are traced after the whole batch's bounce, many paths' at once. At each non-specular
 //! hit, direct lighting is estimated either by sampling the lights (`-l` samples per area
 //! light, one per delta light) and tracing shadow rays, or (`-H`) by tracing uniformly
 //! distributed hemisphere rays and adding the emission they find (as many as light sampling

@@ -8,7 +8,8 @@
 //!    end there, and the others go on in waves of 1024 paths;
 //! 3. *shade*: each hit adds its emission, queues its direct-lighting samples (shadow rays, or
 //!    hemisphere rays under `-H`), samples its BSDF and plays Russian roulette
-//!    ([`Integrator::shade`]), writing the continuation ray in place of the ray shaded;
+//!    ([`Integrator::shade`], then [`Integrator::scatter`] for the same path), writing the
+//!    continuation ray in place of the ray shaded;
 //! 4. *trace* the shadow rays of the whole batch as one occlusion stream (and the hemisphere
 //!    rays as one closest-hit stream), add each point's direct lighting
 //!    ([`Integrator::direct_total`]);
@@ -19,7 +20,7 @@
 //! whatever else is in the batch, and every ray gets the same answer from the stream kernels as
 //! alone, so the image does not depend on the batch, the order of the rays or the thread.
 
-use super::integrator::{Integrator, PathState, Scatter};
+use super::integrator::{Integrator, PathState};
 use super::order::{RayOrder, SortScratch};
 use super::queue::{DirectQueue, RayQueue};
 use super::sampler::Rng;
@@ -60,8 +61,6 @@ pub struct Wavefront {
     alive: Vec<bool>,
     /// `surfaces[k]`: the surface hit by `queue.rays[k]`, if any.
     surfaces: Vec<SurfaceHit>,
-    /// `scatter[k]`: where the path of `queue.rays[k]` scatters, if it goes on.
-    scatter: Vec<Option<Scatter>>,
     /// Direct lighting of the current bounce.
     direct: DirectQueue,
     scratch: SortScratch,
@@ -87,7 +86,6 @@ impl Wavefront {
         room(&mut c.hits, paths);
         room(&mut self.alive, wave);
         room(&mut self.surfaces, wave);
-        room(&mut self.scatter, wave);
         room(&mut self.direct.points, wave);
         room(&mut self.direct.samples, samples);
         let q = &mut self.queue;
@@ -208,11 +206,15 @@ impl Wavefront {
                     *s = scene.surface(ray, hit);
                 }
             }
-            self.scatter.clear();
             for k in 0..q.rays.len() {
                 let id = q.owner[k];
-                let path = &mut self.paths[id as usize];
-                self.scatter.push(integrator.shade(path, &q.rays[k], &q.hits[k], &self.surfaces[k], d, id));
+                let (path, surface) = (&mut self.paths[id as usize], &self.surfaces[k]);
+                let at = integrator.shade(path, &q.rays[k], &q.hits[k], surface, d, id);
+                let next = at.and_then(|at| integrator.scatter(path, surface, &at));
+                if let Some(next) = next {
+                    q.rays[k] = next;
+                }
+                self.alive.push(next.is_some());
                 if d.samples.len() >= DIRECT_FLUSH {
                     // Many light samples per point (`-l`): trace what is queued now, so that
                     // the queue stays bounded.
@@ -221,15 +223,6 @@ impl Wavefront {
                     ctx.trace(d, &mut self.paths, &mut self.scratch, log, clock, times);
                     d.clear();
                 }
-            }
-            clock.lap(&mut times.shade);
-            for (k, at) in self.scatter.iter().enumerate() {
-                let next =
-                    at.and_then(|at| integrator.scatter(&mut self.paths[q.owner[k] as usize], &self.surfaces[k], &at));
-                if let Some(next) = next {
-                    q.rays[k] = next;
-                }
-                self.alive.push(next.is_some());
             }
             clock.lap(&mut times.shade);
 
@@ -373,12 +366,8 @@ pub fn worker_bytes(paths: usize, direct: usize) -> u64 {
     let Capacity { paths, wave, samples } = Capacity::of(paths, direct);
     let ray = size_of::<Ray>() + size_of::<u32>();
     let per_path = size_of::<PathState>() + ray + size_of::<Hit>();
-    let per_wave = ray
-        + size_of::<Hit>()
-        + size_of::<bool>()
-        + size_of::<SurfaceHit>()
-        + size_of::<Option<Scatter>>()
-        + size_of::<super::queue::DirectPoint>();
+    let per_wave =
+        ray + size_of::<Hit>() + size_of::<bool>() + size_of::<SurfaceHit>() + size_of::<super::queue::DirectPoint>();
     let per_sample = size_of::<super::queue::DirectSample>() + ray + size_of::<bool>();
     let sort = SortScratch::bytes_per_ray() * samples.max(wave);
     (paths * per_path + wave * per_wave + samples * per_sample + sort) as u64
