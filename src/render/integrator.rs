@@ -310,6 +310,7 @@ impl<'a> Integrator<'a> {
 
     /// CS184 `estimate_direct_lighting_importance`: `-l` samples of each area light, one of
     /// each delta light, each with a shadow ray (none when the light touches the point).
+    #[inline]
     fn queue_lights(&self, s: &SurfaceHit, b: &Bsdf, frame: &Frame, wo: Vec3, rng: &mut Rng, out: &mut DirectQueue) {
         let ctx = LightContext { p: s.position, n: frame.z * wo.z.signum() };
         for (group, light) in self.lights.lights.iter().enumerate() {
