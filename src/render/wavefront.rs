@@ -201,11 +201,7 @@ impl Wavefront {
             let scene = tracer.scene();
             resize(&mut self.surfaces, q.rays.len(), MISSED);
             scene.prefetch_hits(&q.hits);
-            for ((s, ray), hit) in self.surfaces.iter_mut().zip(&q.rays).zip(&q.hits) {
-                if hit.is_hit() {
-                    *s = scene.surface(ray, hit);
-                }
-            }
+            scene.surfaces(&q.rays, &q.hits, &mut self.surfaces);
             for k in 0..q.rays.len() {
                 let id = q.owner[k];
                 let (path, surface) = (&mut self.paths[id as usize], &self.surfaces[k]);

@@ -8,6 +8,7 @@ pub mod light;
 pub mod material;
 pub mod query;
 pub mod store;
+pub mod surface;
 
 pub use builder::{CommitReport, SceneBuilder, SceneError};
 pub use cache::{CacheError, CacheReport};

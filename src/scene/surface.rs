@@ -1,0 +1,228 @@
+//! The local geometry of many hits at once ([`Scene::surfaces`]): eight triangle hits per step
+//! in SIMD lanes, with the operations of [`Scene::surface`] in the same order, so every hit's
+//! [`SurfaceHit`] is bit-identical to the one-at-a-time result.
+
+use crate::math::Vec3;
+use crate::ray::{Hit, Ray};
+use crate::scene::store::{Scene, SurfaceHit, TrianglesSoa};
+use crate::simd::isa::{IsaOp, dispatch};
+use crate::simd::{IsaLanes, Lanes, Vec3x};
+
+/// Hits per SIMD step.
+const STEP: usize = 8;
+
+impl Scene {
+    /// [`Scene::surface`] of every hit of `hits` (traced along `rays`) into `out`, leaving
+    /// the entries of misses as they are. `rays`, `hits` and `out` must have the same length.
+    /// Runs eight triangle hits at a time on the scene's ISA ([`Scene::isa`]); the results
+    /// are those of [`Scene::surface`] bit for bit.
+    pub fn surfaces(&self, rays: &[Ray], hits: &[Hit], out: &mut [SurfaceHit]) {
+        assert!(rays.len() == hits.len() && hits.len() == out.len(), "rays, hits and out differ in length");
+        dispatch(self.isa, Surfaces { scene: self, rays, hits, out })
+    }
+}
+
+struct Surfaces<'a> {
+    scene: &'a Scene,
+    rays: &'a [Ray],
+    hits: &'a [Hit],
+    out: &'a mut [SurfaceHit],
+}
+
+impl IsaOp for Surfaces<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn run<I: IsaLanes>(self) {
+        let (scene, rays, hits, out) = (self.scene, self.rays, self.hits, self.out);
+        let nt = scene.triangles.len();
+        let full = hits.len() / STEP * STEP;
+        for ((r, h), o) in
+            rays[..full].chunks_exact(STEP).zip(hits[..full].chunks_exact(STEP)).zip(out.chunks_exact_mut(STEP))
+        {
+            let h: &[Hit; STEP] = h.try_into().expect("a step of hits");
+            // Misses carry `Hit::NONE` (past every triangle), spheres ids from `nt` on.
+            let triangles = h.iter().enumerate().fold(0u32, |m, (j, h)| m | (((h.prim as usize) < nt) as u32) << j);
+            if triangles != 0 {
+                triangle_surfaces::<I::F8>(&scene.triangles, h, triangles, o.try_into().expect("a step of outputs"));
+            }
+            if triangles != (1 << STEP) - 1 {
+                for j in 0..STEP {
+                    if triangles >> j & 1 == 0 && h[j].is_hit() {
+                        o[j] = scene.surface(&r[j], &h[j]);
+                    }
+                }
+            }
+        }
+        for ((r, h), o) in rays[full..].iter().zip(&hits[full..]).zip(&mut out[full..]) {
+            if h.is_hit() {
+                *o = scene.surface(r, h);
+            }
+        }
+    }
+}
+
+/// The surfaces of the hits of `hits` whose bit is set in `triangles` (triangle hits), in
+/// lanes `V` (of eight); the other entries of `out` are left as they are.
+#[inline(always)]
+fn triangle_surfaces<V: Lanes>(tris: &TrianglesSoa, hits: &[Hit; STEP], triangles: u32, out: &mut [SurfaceHit; STEP]) {
+    debug_assert_eq!(V::LANES, STEP);
+    // Rows: the corners a, b, c (x, y, z each), then their normals; lanes of other hits
+    // stay zero and their results are dropped.
+    let mut rows = [[0.0f32; STEP]; 18];
+    let (mut u, mut v) = ([0.0f32; STEP], [0.0f32; STEP]);
+    let smooth = !tris.normals.is_empty();
+    for j in crate::simd::bits(triangles) {
+        let h = &hits[j];
+        let corners = tris.indices[h.prim as usize];
+        for (c, &i) in corners.iter().enumerate() {
+            let p = tris.positions[i as usize];
+            (rows[3 * c][j], rows[3 * c + 1][j], rows[3 * c + 2][j]) = (p.x, p.y, p.z);
+            if smooth {
+                let n = tris.normals[i as usize];
+                (rows[9 + 3 * c][j], rows[10 + 3 * c][j], rows[11 + 3 * c][j]) = (n.x, n.y, n.z);
+            }
+        }
+        (u[j], v[j]) = (h.u, h.v);
+    }
+    let (a, b, c) = (row::<V>(&rows, 0), row::<V>(&rows, 3), row::<V>(&rows, 6));
+    let (u, v) = (V::load(&u), V::load(&v));
+    let w = V::splat(1.0) - u - v;
+    let position = barycentric(a, b, c, w, u, v);
+    let (ng, ng_ok) = normalized((b - a).cross(c - a));
+    let z = V::splat(0.0);
+    let ng = Vec3x { x: ng_ok.select(ng.x, z), y: ng_ok.select(ng.y, z), z: ng_ok.select(ng.z, V::splat(1.0)) };
+    let mut ns = ng;
+    if smooth {
+        let (i, i_ok) = normalized(barycentric(row(&rows, 9), row(&rows, 12), row(&rows, 15), w, u, v));
+        let flip = i.dot(ng).lt(z);
+        let i = Vec3x { x: flip.select(-i.x, i.x), y: flip.select(-i.y, i.y), z: flip.select(-i.z, i.z) };
+        ns = Vec3x { x: i_ok.select(i.x, ng.x), y: i_ok.select(i.y, ng.y), z: i_ok.select(i.z, ng.z) };
+    }
+    let mut lanes = [[0.0f32; STEP]; 9];
+    for (k, x) in [position.x, position.y, position.z, ng.x, ng.y, ng.z, ns.x, ns.y, ns.z].into_iter().enumerate() {
+        x.store(&mut lanes[k]);
+    }
+    for j in crate::simd::bits(triangles) {
+        let l = |k: usize| Vec3::new(lanes[k][j], lanes[k + 1][j], lanes[k + 2][j]);
+        out[j] = SurfaceHit {
+            position: l(0),
+            geometric_normal: l(3),
+            shading_normal: l(6),
+            material: tris.material[hits[j].prim as usize],
+        };
+    }
+}
+
+/// Rows `k`, `k + 1`, `k + 2` of `rows` as a vector of lanes.
+#[inline(always)]
+fn row<V: Lanes>(rows: &[[f32; STEP]; 18], k: usize) -> Vec3x<V> {
+    Vec3x { x: V::load(&rows[k]), y: V::load(&rows[k + 1]), z: V::load(&rows[k + 2]) }
+}
+
+/// `a w + b u + c v`, summed in the order of `Scene::surface`.
+#[inline(always)]
+fn barycentric<V: Lanes>(a: Vec3x<V>, b: Vec3x<V>, c: Vec3x<V>, w: V, u: V, v: V) -> Vec3x<V> {
+    Vec3x { x: a.x * w + b.x * u + c.x * v, y: a.y * w + b.y * u + c.y * v, z: a.z * w + b.z * u + c.z * v }
+}
+
+/// `v` scaled to unit length as `glam::Vec3::try_normalize` does (`v * (1 / |v|)`), and the
+/// lanes where that succeeds (a finite, positive reciprocal length).
+#[inline(always)]
+fn normalized<V: Lanes>(v: Vec3x<V>) -> (Vec3x<V>, V) {
+    let rcp = V::splat(1.0) / v.dot(v).sqrt();
+    let ok = rcp.is_finite() & rcp.gt(V::splat(0.0));
+    (Vec3x { x: v.x * rcp, y: v.y * rcp, z: v.z * rcp }, ok)
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::math::Vec3;
+    use crate::ray::{Hit, Ray};
+    use crate::render::sampler::Rng;
+    use crate::scene::{Material, SceneBuilder, SurfaceHit};
+    use crate::{BuildOptions, Isa};
+
+    const UNTOUCHED: SurfaceHit = SurfaceHit {
+        position: Vec3::splat(-7.0),
+        geometric_normal: Vec3::ZERO,
+        shading_normal: Vec3::ZERO,
+        material: 99,
+    };
+
+    fn bits(s: &SurfaceHit) -> [u32; 10] {
+        let [p, g, n] = [s.position, s.geometric_normal, s.shading_normal].map(|v| v.to_array().map(f32::to_bits));
+        [p[0], p[1], p[2], g[0], g[1], g[2], n[0], n[1], n[2], s.material]
+    }
+
+    /// A soup of random triangles (smooth or flat, some vertex normals zero or pointing
+    /// away) and spheres, hit by random rays: the batch equals `surface` bit for bit on
+    /// every ISA, for every batch length (whole steps, remainders, steps mixing spheres and
+    /// misses).
+    #[test]
+    fn batches_equal_one_at_a_time_on_every_isa() {
+        let mut rng = Rng::new(3, 7);
+        let mut r3 = |s: f32| Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * s - s * 0.5;
+        for smooth in [false, true] {
+            let mut b = SceneBuilder::new();
+            let m = b.add_material(Material::default());
+            let mut positions = Vec::new();
+            let mut normals = Vec::new();
+            let mut indices = Vec::new();
+            for t in 0..400u32 {
+                let c = r3(8.0);
+                for k in 0..3 {
+                    positions.push(c + r3(1.0));
+                    normals.push(match (t + k) % 7 {
+                        0 => Vec3::ZERO,
+                        1 => -r3(2.0),
+                        _ => r3(2.0),
+                    });
+                }
+                indices.push([3 * t, 3 * t + 1, 3 * t + 2]);
+            }
+            if smooth {
+                b.add_mesh_with_normals(&positions, Some(&normals), &indices, m).unwrap();
+            } else {
+                b.add_mesh(&positions, &indices, m).unwrap();
+            }
+            for _ in 0..40 {
+                b.add_sphere(r3(8.0), 0.3, m).unwrap();
+            }
+            let (mut scene, _) = b.commit(&BuildOptions::default());
+            // Triangle hits first (whole SIMD steps), then rays in any order (steps that mix
+            // triangles, spheres and misses).
+            let mut rays: Vec<Ray> = (0..3000)
+                .map(|_| {
+                    let o = r3(14.0);
+                    Ray::new(o, r3(4.0) - o)
+                })
+                .collect();
+            let nt = scene.num_triangles();
+            rays.sort_by_key(|r| (scene.intersect1(r).prim as usize) >= nt);
+            let hits: Vec<Hit> = rays.iter().map(|r| scene.intersect1(r)).collect();
+            let count = |f: &dyn Fn(&Hit) -> bool| hits.iter().filter(|h| f(h)).count();
+            let kinds = [
+                count(&|h| (h.prim as usize) < nt),
+                count(&|h| h.is_hit() && h.prim as usize >= nt),
+                count(&|h| !h.is_hit()),
+            ];
+            assert!(kinds[0] > 800 && kinds[1] > 20 && kinds[2] > 100, "triangle, sphere hits and misses: {kinds:?}");
+            let want: Vec<_> = rays.iter().zip(&hits).map(|(r, h)| h.is_hit().then(|| scene.surface(r, h))).collect();
+            for isa in Isa::available() {
+                scene.set_isa(isa).unwrap();
+                for len in [hits.len(), 8, 13, 3, kinds[0] + 5] {
+                    let mut out = vec![UNTOUCHED; len];
+                    scene.surfaces(&rays[..len], &hits[..len], &mut out);
+                    for (k, (got, want)) in out.iter().zip(&want).enumerate() {
+                        assert_eq!(
+                            bits(got),
+                            bits(&want.unwrap_or(UNTOUCHED)),
+                            "{isa}, hit {k} of {len}: {:?}",
+                            hits[k]
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
