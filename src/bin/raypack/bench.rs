@@ -139,9 +139,17 @@ pub struct BenchRow {
     pub mrays_per_s_max: f64,
     /// Checksum of the results.
     pub checksum: Checksum,
-    /// True when the checksum differs from the reference's by more than `1e-5` of the rays.
+    /// True when the hit count differs from the reference's by more than [`HIT_TOLERANCE`] of
+    /// the rays.
     pub checksum_differs: bool,
 }
+
+/// The fraction of a set's rays whose hit or miss may differ from the reference before a
+/// method's figures are left out of the summary: Embree rounds differently, so a ray through
+/// a shared edge or vertex can hit with one tracer and slip through with the other (on a 2M
+/// triangle knot, Embree's shadow rays differed on 2 of 137,095 rays, 1.5e-5). A broken
+/// comparison (another scene, wrong rays) differs on far more.
+const HIT_TOLERANCE: f64 = 1e-4;
 
 /// Everything `raypack bench` measured.
 #[derive(Clone, Debug, PartialEq)]
@@ -401,7 +409,7 @@ pub fn run_bench(
                 }
             });
             for ((m, checksum), (reps, times)) in chosen.iter().zip(checksums).zip(reps.into_iter().zip(times)) {
-                let allowed = (set.rays.len() as f64 * 1e-5).max(0.0);
+                let allowed = set.rays.len() as f64 * HIT_TOLERANCE;
                 let checksum_differs = (checksum.hits as f64 - ref_sum.hits as f64).abs() > allowed;
                 let secs = |d: Duration| d.as_secs_f64().max(1e-12);
                 let mrays = |d: Duration| (reps * set.rays.len()) as f64 / secs(d) / 1e6;
@@ -493,7 +501,7 @@ impl BenchReport {
             let Some(e) = embree.filter(|_| !seen.contains(&r.rays)) else { continue };
             seen.push(r.rays);
             out.push(format!(
-                "{}: Embree left out: its hits ({}) differ from raypack's ({}) on more than 1e-5 of the {} rays; --verbose lists its figures",
+                "{}: Embree left out: its hits ({}) differ from raypack's ({}) on more than {HIT_TOLERANCE:e} of the {} rays; --verbose lists its figures",
                 r.rays, e.checksum.hits, r.raypack.checksum.hits, e.ray_count
             ));
         }
@@ -943,7 +951,7 @@ mod tests {
         let text = report.text(false);
         assert!(
             text.contains(
-                "primary: Embree left out: its hits (7) differ from raypack's (0) on more than 1e-5 of the 10 rays"
+                "primary: Embree left out: its hits (7) differ from raypack's (0) on more than 1e-4 of the 10 rays"
             ),
             "{text}"
         );
