@@ -89,14 +89,12 @@ fn triangle_surfaces<V: Lanes>(tris: &TrianglesSoa, hits: &[Hit; STEP], triangle
     let w = V::splat(1.0) - u - v;
     let position = barycentric(a, b, c, w, u, v);
     let (ng, ng_ok) = normalized((b - a).cross(c - a));
-    let z = V::splat(0.0);
-    let ng = Vec3x { x: ng_ok.select(ng.x, z), y: ng_ok.select(ng.y, z), z: ng_ok.select(ng.z, V::splat(1.0)) };
+    let ng = Vec3x::select(ng_ok, ng, Vec3x::splat(Vec3::Z));
     let mut ns = ng;
     if smooth {
         let (i, i_ok) = normalized(barycentric(row(&rows, 9), row(&rows, 12), row(&rows, 15), w, u, v));
-        let flip = i.dot(ng).lt(z);
-        let i = Vec3x { x: flip.select(-i.x, i.x), y: flip.select(-i.y, i.y), z: flip.select(-i.z, i.z) };
-        ns = Vec3x { x: i_ok.select(i.x, ng.x), y: i_ok.select(i.y, ng.y), z: i_ok.select(i.z, ng.z) };
+        let i = Vec3x::select(i.dot(ng).lt(V::splat(0.0)), -i, i);
+        ns = Vec3x::select(i_ok, i, ng);
     }
     let mut lanes = [[0.0f32; STEP]; 9];
     for (k, x) in [position.x, position.y, position.z, ng.x, ng.y, ng.z, ns.x, ns.y, ns.z].into_iter().enumerate() {

@@ -160,10 +160,25 @@ impl<V: Lanes> Vec3x<V> {
         self.x * o.x + self.y * o.y + self.z * o.z
     }
 
+    /// Lanes of `t` where `mask` is true, of `f` elsewhere.
+    #[inline(always)]
+    pub fn select(mask: V, t: Self, f: Self) -> Self {
+        Self { x: mask.select(t.x, f.x), y: mask.select(t.y, f.y), z: mask.select(t.z, f.z) }
+    }
+
     /// Lane `i` as a scalar vector.
     #[inline(always)]
     pub fn lane(self, i: usize) -> crate::math::Vec3 {
         crate::math::Vec3::new(self.x.lane(i), self.y.lane(i), self.z.lane(i))
+    }
+}
+
+impl<V: Lanes> Neg for Vec3x<V> {
+    type Output = Self;
+    /// Lane-wise negation.
+    #[inline(always)]
+    fn neg(self) -> Self {
+        Self { x: -self.x, y: -self.y, z: -self.z }
     }
 }
 
