@@ -30,6 +30,9 @@ use crate::math::Vec3;
 use crate::ray::{Hit, Ray};
 use crate::scene::{Bsdf, Material, Scene, SurfaceHit};
 
+mod lanes;
+pub use lanes::{Entries, LaneLights, STEP, SampleLanes};
+
 /// The quantity a render computes per camera ray.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum IntegratorKind {
@@ -122,6 +125,9 @@ pub struct Integrator<'a> {
     bounces: Option<(u32, u32)>,
     /// Hemisphere rays per shading point under `-H`: the shadow rays light sampling would use.
     hemisphere_samples: u32,
+    /// The lights as the lanes sample them ([`Integrator::shade_lanes`]); `None` when the
+    /// lanes cannot shade for this integrator.
+    lane_lights: Option<LaneLights>,
 }
 
 impl<'a> Integrator<'a> {
@@ -130,13 +136,19 @@ impl<'a> Integrator<'a> {
         let lights = LightSet::new(scene);
         let per_light = |l: &SampledLight| if l.is_delta() { 1 } else { settings.light_samples.max(1) };
         let hemisphere_samples = lights.lights.iter().map(per_light).sum();
+        let bounces = settings.integrator.bounces(settings.max_depth);
+        let lane_lights = match bounces {
+            Some(_) if !settings.hemisphere_sampling => Some(LaneLights::new(&lights.lights, settings.light_samples)),
+            _ => None,
+        };
         Self {
             scene,
             settings,
             tracer: Tracer::new(scene, settings.brute_force),
             lights,
-            bounces: settings.integrator.bounces(settings.max_depth),
+            bounces,
             hemisphere_samples,
+            lane_lights,
         }
     }
 
@@ -312,31 +324,42 @@ impl<'a> Integrator<'a> {
     /// each delta light, each with a shadow ray (none when the light touches the point).
     #[inline]
     fn queue_lights(&self, s: &SurfaceHit, b: &Bsdf, frame: &Frame, wo: Vec3, rng: &mut Rng, out: &mut DirectQueue) {
-        let ctx = LightContext { p: s.position, n: frame.z * wo.z.signum() };
         for (group, light) in self.lights.lights.iter().enumerate() {
             let n = if light.is_delta() { 1 } else { self.settings.light_samples.max(1) };
             for _ in 0..n {
-                let u = rng.next_2d();
-                let Some(ls) = light.sample(self.scene, &ctx, u) else { continue };
-                let wi = frame.to_local(ls.wi);
-                let f = bsdf::f(b, wo, wi);
-                if f == Vec3::ZERO || !(ls.pdf > 0.0) {
-                    continue;
-                }
-                let shadow = match ls.point {
-                    Some(q) => spawn_ray_to(s.position, s.geometric_normal, q),
-                    None => Some(spawn_ray_infinite(s.position, s.geometric_normal, ls.wi)),
-                };
-                let sample = DirectSample {
-                    f,
-                    radiance: ls.radiance,
-                    scale: wi.z.abs() / ls.pdf,
-                    group: group as u32,
-                    visible: true,
-                };
-                out.push_light(sample, shadow);
+                self.queue_light_sample(light, group as u32, s, b, frame, wo, rng.next_2d(), out);
             }
         }
+    }
+
+    /// One sample of `light` (group `group`) at `s` with the uniforms `u`, queued in `out`
+    /// when it carries light.
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    fn queue_light_sample(
+        &self,
+        light: &SampledLight,
+        group: u32,
+        s: &SurfaceHit,
+        b: &Bsdf,
+        frame: &Frame,
+        wo: Vec3,
+        u: (f32, f32),
+        out: &mut DirectQueue,
+    ) {
+        let ctx = LightContext { p: s.position, n: frame.z * wo.z.signum() };
+        let Some(ls) = light.sample(self.scene, &ctx, u) else { return };
+        let wi = frame.to_local(ls.wi);
+        let f = bsdf::f(b, wo, wi);
+        if f == Vec3::ZERO || !(ls.pdf > 0.0) {
+            return;
+        }
+        let shadow = match ls.point {
+            Some(q) => spawn_ray_to(s.position, s.geometric_normal, q),
+            None => Some(spawn_ray_infinite(s.position, s.geometric_normal, ls.wi)),
+        };
+        let sample = DirectSample { f, radiance: ls.radiance, scale: wi.z.abs() / ls.pdf, group, visible: true };
+        out.push_light(sample, shadow);
     }
 
     /// CS184 `estimate_direct_lighting_hemisphere`: uniform directions on the hemisphere of

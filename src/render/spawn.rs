@@ -10,9 +10,12 @@
 use crate::math::Vec3;
 use crate::ray::Ray;
 
-const ORIGIN: f32 = 1.0 / 32.0;
-const FLOAT_SCALE: f32 = 1.0 / 65536.0;
-const INT_SCALE: f32 = 256.0;
+/// Coordinates smaller than this in magnitude move by an absolute step.
+pub(crate) const ORIGIN: f32 = 1.0 / 32.0;
+/// The absolute step along the normal, near the origin.
+pub(crate) const FLOAT_SCALE: f32 = 1.0 / 65536.0;
+/// Units in the last place stepped along the normal, away from the origin.
+pub(crate) const INT_SCALE: f32 = 256.0;
 
 /// `p` moved off its surface along the unit normal `n` (toward the side `n` points to).
 #[inline]

@@ -20,7 +20,7 @@
 //! whatever else is in the batch, and every ray gets the same answer from the stream kernels as
 //! alone, so the image does not depend on the batch, the order of the rays or the thread.
 
-use super::integrator::{Integrator, PathState};
+use super::integrator::{Entries, Integrator, PathState, STEP, SampleLanes};
 use super::order::{RayOrder, SortScratch};
 use super::queue::{DirectQueue, RayQueue};
 use super::sampler::Rng;
@@ -64,6 +64,8 @@ pub struct Wavefront {
     /// Direct lighting of the current bounce.
     direct: DirectQueue,
     scratch: SortScratch,
+    /// The light samples of a step of lane shading.
+    lane_scratch: Vec<SampleLanes>,
 }
 
 impl Wavefront {
@@ -104,6 +106,7 @@ impl Wavefront {
             room(&mut p.hits, samples);
         }
         self.scratch.reserve(samples.max(wave));
+        room(&mut self.lane_scratch, integrator.direct_samples_per_point() as usize);
     }
 
     /// Starts a new batch.
@@ -197,20 +200,39 @@ impl Wavefront {
             // Shade: each surviving path's continuation replaces its ray.
             let (q, d) = (&mut self.queue, &mut self.direct);
             d.clear();
-            self.alive.clear();
             let scene = tracer.scene();
             resize(&mut self.surfaces, q.rays.len(), MISSED);
             scene.prefetch_hits(&q.hits);
             scene.surfaces(&q.rays, &q.hits, &mut self.surfaces);
-            for k in 0..q.rays.len() {
-                let id = q.owner[k];
-                let (path, surface) = (&mut self.paths[id as usize], &self.surfaces[k]);
-                let at = integrator.shade(path, &q.rays[k], &q.hits[k], surface, d, id);
-                let next = at.and_then(|at| integrator.scatter(path, surface, &at));
-                if let Some(next) = next {
-                    q.rays[k] = next;
+            let n = q.rays.len();
+            resize(&mut self.alive, n, false);
+            for k0 in (0..n).step_by(STEP) {
+                let mut e = Entries {
+                    paths: &mut self.paths,
+                    rays: &mut q.rays,
+                    owner: &q.owner,
+                    hits: &q.hits,
+                    surfaces: &self.surfaces,
+                    alive: &mut self.alive,
+                };
+                // Diffuse hits eight at a time in SIMD lanes, the others one by one.
+                let lanes = integrator.lane_entries(&e, k0);
+                for k in k0..n.min(k0 + STEP) {
+                    if lanes >> (k - k0) & 1 != 0 {
+                        continue;
+                    }
+                    let id = e.owner[k];
+                    let (path, surface) = (&mut e.paths[id as usize], &e.surfaces[k]);
+                    let at = integrator.shade(path, &e.rays[k], &e.hits[k], surface, d, id);
+                    let next = at.and_then(|at| integrator.scatter(path, surface, &at));
+                    if let Some(next) = next {
+                        e.rays[k] = next;
+                    }
+                    e.alive[k] = next.is_some();
                 }
-                self.alive.push(next.is_some());
+                if lanes != 0 {
+                    integrator.shade_lanes(&mut e, k0, lanes, d, &mut self.lane_scratch);
+                }
                 if d.samples.len() >= DIRECT_FLUSH {
                     // Many light samples per point (`-l`): trace what is queued now, so that
                     // the queue stays bounded.
@@ -348,8 +370,9 @@ impl Capacity {
     /// For batches of `paths` paths and at most `direct` direct samples per shading point.
     fn of(paths: usize, direct: usize) -> Self {
         let wave = paths.min(WAVE_PATHS);
-        // The shading of a bounce stops to trace its direct lighting past DIRECT_FLUSH samples.
-        let samples = wave.saturating_mul(direct.max(1)).min(DIRECT_FLUSH + direct);
+        // The shading of a bounce stops to trace its direct lighting past DIRECT_FLUSH samples
+        // (checked after each step of STEP paths).
+        let samples = wave.saturating_mul(direct.max(1)).min(DIRECT_FLUSH + STEP * direct);
         Self { paths, wave, samples }
     }
 }

@@ -93,6 +93,10 @@ pub trait Lanes:
     fn reduce_min(self) -> f32;
     /// Largest lane (lanes must not be NaN).
     fn reduce_max(self) -> f32;
+    /// `self` stepped by `k` units in the last place: the bits of each lane, read as an
+    /// `i32`, plus `k` truncated toward zero (`cvttps2dq`). `k` must be finite and within
+    /// `i32`'s range, where Rust's `k as i32` agrees.
+    fn add_ulps(self, k: Self) -> Self;
 
     /// Magnitude of each lane (the sign bit cleared).
     #[inline(always)]
@@ -182,6 +186,34 @@ impl<V: Lanes> Neg for Vec3x<V> {
     }
 }
 
+impl<V: Lanes> Add for Vec3x<V> {
+    type Output = Self;
+    /// Lane-wise sum.
+    #[inline(always)]
+    fn add(self, o: Self) -> Self {
+        Self { x: self.x + o.x, y: self.y + o.y, z: self.z + o.z }
+    }
+}
+
+impl<V: Lanes> Mul<V> for Vec3x<V> {
+    type Output = Self;
+    /// Each component times the lanes of `s` (`glam::Vec3 * f32` per lane).
+    #[inline(always)]
+    fn mul(self, s: V) -> Self {
+        Self { x: self.x * s, y: self.y * s, z: self.z * s }
+    }
+}
+
+impl<V: Lanes> Div<V> for Vec3x<V> {
+    type Output = Self;
+    /// Each component divided by the lanes of `s` (`glam::Vec3 / f32` per lane: three
+    /// divisions, not a reciprocal).
+    #[inline(always)]
+    fn div(self, s: V) -> Self {
+        Self { x: self.x / s, y: self.y / s, z: self.z / s }
+    }
+}
+
 impl<V: Lanes> Sub for Vec3x<V> {
     type Output = Self;
     /// Lane-wise difference.
@@ -257,6 +289,12 @@ pub(crate) fn check_lanes<V: Lanes>() {
         let x = V::load(&v);
         let (lo, hi) = v.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
         assert_eq!((x.reduce_min(), x.reduce_max()), (lo, hi));
+    }
+    let steps = [3.7f32, -2.2, 0.0, -0.9, 256.0, -256.0, 1.0, 7.9, -3.5, 0.2, 12.0, -12.0, 99.0, -1.0, 2.0, 5.5];
+    let ulps = a.add_ulps(V::load(&steps)).to_array();
+    for i in 0..n {
+        let want = (pattern[i].to_bits() as i32).wrapping_add(steps[i] as i32) as u32;
+        assert_eq!(ulps[i].to_bits(), want, "lane {i}");
     }
     let bit_and = (V::from_bitmask(0b1010) & V::from_bitmask(0b0110)).bitmask();
     let bit_or = (V::from_bitmask(0b1010) | V::from_bitmask(0b0110)).bitmask();

@@ -98,6 +98,13 @@ macro_rules! impl_lanes {
             fn reduce_max(self) -> f32 {
                 halving::<$n>(self.to_array(), false)
             }
+            #[inline(always)]
+            fn add_ulps(self, k: Self) -> Self {
+                let (a, k) = (self.as_array(), k.as_array());
+                <$t>::new(std::array::from_fn(|i| {
+                    f32::from_bits((a[i].to_bits() as i32).wrapping_add(k[i] as i32) as u32)
+                }))
+            }
         }
     };
 }

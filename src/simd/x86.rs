@@ -225,6 +225,11 @@ impl Lanes for M256 {
     fn reduce_max(self) -> f32 {
         self.reduce(false)
     }
+    #[inline(always)]
+    fn add_ulps(self, k: Self) -> Self {
+        // `vpaddd` is AVX2, which both tiers using `M256` have.
+        M256(simd!(_mm256_castsi256_ps(_mm256_add_epi32(_mm256_castps_si256(self.0), _mm256_cvttps_epi32(k.0)))))
+    }
 }
 
 impl M512 {
@@ -331,6 +336,10 @@ impl Lanes for M512 {
     fn reduce_max(self) -> f32 {
         let (lo, hi) = self.halves();
         lo.vmax(hi).reduce_max()
+    }
+    #[inline(always)]
+    fn add_ulps(self, k: Self) -> Self {
+        M512(simd!(_mm512_castsi512_ps(_mm512_add_epi32(_mm512_castps_si512(self.0), _mm512_cvttps_epi32(k.0)))))
     }
 }
 
@@ -447,6 +456,10 @@ impl<V: Lanes> Lanes for Pair<V> {
     #[inline(always)]
     fn reduce_max(self) -> f32 {
         self.0.vmax(self.1).reduce_max()
+    }
+    #[inline(always)]
+    fn add_ulps(self, k: Self) -> Self {
+        Pair(self.0.add_ulps(k.0), self.1.add_ulps(k.1))
     }
 }
 

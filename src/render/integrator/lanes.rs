@@ -1,0 +1,600 @@
+//! Shading eight paths at a time: [`Integrator::shade`] and [`Integrator::scatter`] for the
+//! common case, a diffuse surface lit through light sampling by rectangle and point lights,
+//! with the arithmetic in SIMD lanes on the scene's ISA (dispatched as the tracing kernels
+//! are) and the operations of the one-path code in the same order. Every path's radiance,
+//! random numbers, direct samples and rays are therefore bit-identical to shading it alone
+//! (unit test on every ISA, and the same images).
+//!
+//! What stays one path at a time: reading its state and surface into rows, its emission,
+//! drawing its random numbers (each path has its own generator, drawn in the order of the
+//! one-path code: light samples, BSDF sample, roulette), and queueing its direct samples and
+//! continuation ray. The lanes compute the shading frame, the light samples and their shadow
+//! rays, the cosine-weighted bounce direction and the continuation's origin.
+
+use super::{Frame, Integrator, PathState, ROULETTE_START};
+use crate::math::Vec3;
+use crate::ray::{Hit, Ray};
+use crate::render::light::SampledLight;
+use crate::render::queue::{DirectQueue, DirectSample};
+use crate::scene::{Bsdf, SurfaceHit};
+use crate::simd::isa::{IsaOp, dispatch};
+use crate::simd::{IsaLanes, Lanes, Vec3x};
+use std::f32::consts::{FRAC_1_PI, FRAC_PI_4};
+
+/// Paths per step.
+pub const STEP: usize = 8;
+
+/// `N` rows of one value per lane.
+type Rows<const N: usize> = [[f32; STEP]; N];
+
+/// A light the lanes sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum LaneLight {
+    /// [`SampledLight::Rect`].
+    Rect { radiance: Vec3, center: Vec3, normal: Vec3, dim_x: Vec3, dim_y: Vec3, area: f32 },
+    /// [`SampledLight::Point`].
+    Point { position: Vec3, intensity: Vec3 },
+}
+
+/// The direct-lighting samples of one shading point, in the order light sampling draws them:
+/// each light (its index is the sample's group) as many times as it is sampled. Rectangles
+/// and points are sampled in the lanes; the other kinds (`None` here) one path at a time,
+/// with the uniforms drawn for them in their place.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LaneLights {
+    samples: Vec<(Option<LaneLight>, u32)>,
+}
+
+impl LaneLights {
+    /// The samples of `lights` with `per_area` samples of each area light.
+    pub(super) fn new(lights: &[SampledLight], per_area: u32) -> Self {
+        let mut samples = Vec::new();
+        for (group, light) in lights.iter().enumerate() {
+            let n = if light.is_delta() { 1 } else { per_area.max(1) };
+            let lane = match *light {
+                SampledLight::Rect { radiance, center, normal, dim_x, dim_y, area } => {
+                    Some(LaneLight::Rect { radiance, center, normal, dim_x, dim_y, area })
+                }
+                SampledLight::Point { position, intensity } => Some(LaneLight::Point { position, intensity }),
+                _ => None,
+            };
+            samples.extend(std::iter::repeat_n((lane, group as u32), n as usize));
+        }
+        Self { samples }
+    }
+
+    /// True when every light is sampled in the lanes.
+    fn all_lanes(&self) -> bool {
+        self.samples.iter().all(|s| s.0.is_some())
+    }
+
+    /// Samples per shading point.
+    pub fn len(&self) -> usize {
+        self.samples.len()
+    }
+
+    /// True when there is no light to sample.
+    pub fn is_empty(&self) -> bool {
+        self.samples.is_empty()
+    }
+}
+
+/// One direct-lighting sample of a step's eight points: its uniforms, and what the lanes
+/// made of them.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SampleLanes {
+    /// The two uniforms of each lane.
+    u: Rows<2>,
+    /// Lanes whose sample is queued (it carries light).
+    keep: u32,
+    /// Lanes whose sample has a shadow ray (the others touch the light: always visible).
+    shadow: u32,
+    /// Shadow ray origin, unit direction and end.
+    origin: Rows<3>,
+    dir: Rows<3>,
+    tfar: [f32; STEP],
+    /// `|cos θ| / pdf`.
+    scale: [f32; STEP],
+    /// Radiance arriving from the sample (point lights: `I / r²`).
+    radiance: Rows<3>,
+}
+
+/// The rows of one step: what is read from the paths, and the continuation computed.
+#[derive(Clone, Copy, Debug, Default)]
+struct StepRows {
+    /// Hit point, geometric normal, shading normal.
+    p: Rows<3>,
+    ng: Rows<3>,
+    ns: Rows<3>,
+    /// `z` of the direction back along the incoming ray, in the shading frame.
+    wo_z: [f32; STEP],
+    /// Uniforms of the BSDF sample.
+    u: Rows<2>,
+    /// Lanes that gather direct lighting.
+    direct: u32,
+    /// Lanes whose BSDF is not black (`albedo / π != 0`).
+    reflects: u32,
+    /// Lanes that scatter (in: the path goes on if its sample does; out: it does).
+    scatter: u32,
+    /// The continuation's origin and unit direction.
+    origin: Rows<3>,
+    dir: Rows<3>,
+}
+
+/// A wave's entries to shade: entry `k` is ray `rays[k]` of path `owner[k]`, which found
+/// `hits[k]` at `surfaces[k]`; `alive[k]` is set when its path goes on (its continuation
+/// then replaces `rays[k]`).
+pub struct Entries<'w> {
+    /// Every path of the batch.
+    pub paths: &'w mut [PathState],
+    /// The rays shaded, replaced by continuations.
+    pub rays: &'w mut [Ray],
+    /// Their owners.
+    pub owner: &'w [u32],
+    /// Their closest hits.
+    pub hits: &'w [Hit],
+    /// The surfaces at the hits.
+    pub surfaces: &'w [SurfaceHit],
+    /// Whether each entry's path goes on.
+    pub alive: &'w mut [bool],
+}
+
+impl Integrator<'_> {
+    /// The entries `k0 + j` of `e` that the lanes can shade (`j < 8`, `k0 + j` in range): a
+    /// hit on a diffuse surface, when the integrator samples its lights through the lanes.
+    #[inline]
+    pub fn lane_entries(&self, e: &Entries<'_>, k0: usize) -> u32 {
+        if self.lane_lights.is_none() {
+            return 0;
+        }
+        let mut mask = 0;
+        for (j, k) in (k0..e.hits.len().min(k0 + STEP)).enumerate() {
+            let s = &e.surfaces[k];
+            let diffuse = matches!(self.scene.materials[s.material as usize].bsdf, Bsdf::Diffuse { .. });
+            mask |= ((e.hits[k].is_hit() && diffuse) as u32) << j;
+        }
+        mask
+    }
+
+    /// [`Integrator::shade`] then [`Integrator::scatter`] of the entries `k0 + j` of `e` for
+    /// the bits `j` of `mask` (from [`Integrator::lane_entries`]), with the same results bit
+    /// for bit; their direct samples go to `direct` in the order of the entries. `scratch`
+    /// is reused from step to step.
+    pub fn shade_lanes(
+        &self,
+        e: &mut Entries<'_>,
+        k0: usize,
+        mask: u32,
+        direct: &mut DirectQueue,
+        scratch: &mut Vec<SampleLanes>,
+    ) {
+        let Some(lights) = &self.lane_lights else { return };
+        let Some((lo, hi)) = self.bounces else { return };
+        let counted = |k: u32| lo <= k && k <= hi;
+        scratch.resize(lights.len(), SampleLanes::default());
+        let mut rows = StepRows::default();
+        let mut albedos = [Vec3::ZERO; STEP];
+        for j in crate::simd::bits(mask) {
+            let k = k0 + j;
+            let (ray, hit, s) = (&e.rays[k], &e.hits[k], &e.surfaces[k]);
+            let path = &mut e.paths[e.owner[k] as usize];
+            let mat = &self.scene.materials[s.material as usize];
+            let Bsdf::Diffuse { albedo } = mat.bsdf else { unreachable!("lane_entries takes diffuse hits only") };
+            if path.sees_emission && counted(path.depth) {
+                path.l += path.beta * self.lights.emitted(hit.prim, mat.emission, ray.dir);
+            }
+            // `Frame::to_local(-ray.dir).z`.
+            let wo_z = (-ray.dir).dot(s.shading_normal);
+            if counted(path.depth + 1) && wo_z != 0.0 {
+                rows.direct |= 1 << j;
+                for sample in scratch.iter_mut() {
+                    (sample.u[0][j], sample.u[1][j]) = path.rng.next_2d();
+                }
+            }
+            if path.depth + 2 <= hi {
+                rows.scatter |= 1 << j;
+                (rows.u[0][j], rows.u[1][j]) = path.rng.next_2d();
+                // The lobe choice, which a diffuse BSDF draws and does not use.
+                path.rng.next_f32();
+            }
+            albedos[j] = albedo;
+            rows.reflects |= ((albedo * FRAC_1_PI != Vec3::ZERO) as u32) << j;
+            rows.wo_z[j] = wo_z;
+            for (r, v) in
+                [(&mut rows.p, s.position), (&mut rows.ng, s.geometric_normal), (&mut rows.ns, s.shading_normal)]
+            {
+                (r[0][j], r[1][j], r[2][j]) = (v.x, v.y, v.z);
+            }
+        }
+        dispatch(self.scene.isa(), Step { rows: &mut rows, lights: &lights.samples, samples: scratch });
+        let lane3 = |r: &Rows<3>, j: usize| Vec3::new(r[0][j], r[1][j], r[2][j]);
+        for j in crate::simd::bits(mask) {
+            let k = k0 + j;
+            let id = e.owner[k];
+            let path = &mut e.paths[id as usize];
+            let albedo = albedos[j];
+            if rows.direct >> j & 1 != 0 {
+                direct.begin(id, path.beta);
+                // The frame of the lights sampled one path at a time.
+                let at = (!lights.all_lanes()).then(|| {
+                    let frame = Frame::from_normal(e.surfaces[k].shading_normal);
+                    (frame, frame.to_local(-e.rays[k].dir))
+                });
+                for (sample, &(light, group)) in scratch.iter().zip(&lights.samples) {
+                    let Some(light) = light else {
+                        let (frame, wo) = at.as_ref().expect("a frame for the lights of other kinds");
+                        let u = (sample.u[0][j], sample.u[1][j]);
+                        let (s, b) = (&e.surfaces[k], &Bsdf::Diffuse { albedo });
+                        self.queue_light_sample(
+                            &self.lights.lights[group as usize],
+                            group,
+                            s,
+                            b,
+                            frame,
+                            *wo,
+                            u,
+                            direct,
+                        );
+                        continue;
+                    };
+                    if sample.keep >> j & 1 == 0 {
+                        continue;
+                    }
+                    let radiance = match light {
+                        LaneLight::Rect { radiance, .. } => radiance,
+                        LaneLight::Point { .. } => lane3(&sample.radiance, j),
+                    };
+                    let shadow = (sample.shadow >> j & 1 != 0)
+                        .then(|| Ray::segment(lane3(&sample.origin, j), lane3(&sample.dir, j), 0.0, sample.tfar[j]));
+                    let f = albedo * FRAC_1_PI;
+                    direct
+                        .push_light(DirectSample { f, radiance, scale: sample.scale[j], group, visible: true }, shadow);
+                }
+            }
+            let mut alive = false;
+            if rows.scatter >> j & 1 != 0 {
+                // `Integrator::scatter` after `bsdf::sample_f` (weight `albedo`, not delta).
+                path.beta *= albedo;
+                path.eta_scale *= 1.0;
+                if path.beta.max_element() > 0.0 {
+                    path.depth += 1;
+                    path.sees_emission = false;
+                    alive = true;
+                    if self.settings.russian_roulette && path.depth >= ROULETTE_START {
+                        let q = (path.beta * path.eta_scale).max_element();
+                        if q < 1.0 {
+                            if path.rng.next_f32() >= q {
+                                alive = false;
+                            } else {
+                                path.beta /= q;
+                            }
+                        }
+                    }
+                }
+                if alive {
+                    e.rays[k] = Ray::new(lane3(&rows.origin, j), lane3(&rows.dir, j));
+                }
+            }
+            e.alive[k] = alive;
+        }
+    }
+}
+
+/// The lanes' part of a step, run on one ISA.
+struct Step<'a> {
+    rows: &'a mut StepRows,
+    lights: &'a [(Option<LaneLight>, u32)],
+    samples: &'a mut [SampleLanes],
+}
+
+impl IsaOp for Step<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn run<I: IsaLanes>(self) {
+        step::<I::F8>(self.rows, self.lights, self.samples)
+    }
+}
+
+#[inline(always)]
+fn load3<V: Lanes>(r: &Rows<3>) -> Vec3x<V> {
+    Vec3x { x: V::load(&r[0]), y: V::load(&r[1]), z: V::load(&r[2]) }
+}
+
+#[inline(always)]
+fn store3<V: Lanes>(v: Vec3x<V>, r: &mut Rows<3>) {
+    v.x.store(&mut r[0]);
+    v.y.store(&mut r[1]);
+    v.z.store(&mut r[2]);
+}
+
+/// The light samples of `rows.direct`'s lanes (into `samples`, one per entry of `lights`) and
+/// the bounce of `rows.scatter`'s lanes; `rows.scatter` keeps the lanes whose bounce carries
+/// light.
+#[inline(always)]
+fn step<V: Lanes>(rows: &mut StepRows, lights: &[(Option<LaneLight>, u32)], samples: &mut [SampleLanes]) {
+    debug_assert_eq!(V::LANES, STEP);
+    let (p, ng, ns) = (load3::<V>(&rows.p), load3::<V>(&rows.ng), load3::<V>(&rows.ns));
+    let wo_z = V::load(&rows.wo_z);
+    let (zero, one) = (V::splat(0.0), V::splat(1.0));
+    if rows.direct != 0 {
+        let gathers = V::from_bitmask(rows.direct) & V::from_bitmask(rows.reflects);
+        for (&(light, _), s) in lights.iter().zip(samples.iter_mut()) {
+            let Some(light) = light else { continue };
+            let (u0, u1) = (V::load(&s.u[0]), V::load(&s.u[1]));
+            // `SampledLight::sample`.
+            let (q, wi, carries, radiance, pdf) = match light {
+                LaneLight::Rect { radiance, center, normal, dim_x, dim_y, area } => {
+                    let half = V::splat(0.5);
+                    let q =
+                        Vec3x::splat(center) + Vec3x::splat(dim_x) * (u0 - half) + Vec3x::splat(dim_y) * (u1 - half);
+                    let d = q - p;
+                    let d2 = d.dot(d);
+                    let wi = d / d2.sqrt();
+                    let cos_l = -wi.dot(Vec3x::splat(normal));
+                    let carries = cos_l.gt(zero) & d2.gt(zero);
+                    (q, wi, carries, Vec3x::splat(radiance), d2 / (V::splat(area) * cos_l))
+                }
+                LaneLight::Point { position, intensity } => {
+                    let q = Vec3x::splat(position);
+                    let d = q - p;
+                    let d2 = d.dot(d);
+                    (q, d / d2.sqrt(), d2.gt(zero), Vec3x::splat(intensity) / d2, one)
+                }
+            };
+            // `Frame::to_local(wi).z`, `bsdf::f` not zero, and a positive density.
+            let wi_z = wi.dot(ns);
+            let keep = carries & gathers & (wo_z * wi_z).gt(zero) & pdf.gt(zero);
+            s.keep = keep.bitmask();
+            (wi_z.abs() / pdf).store(&mut s.scale);
+            store3(radiance, &mut s.radiance);
+            // `spawn_ray_to(p, ng, q)`.
+            let origin = offset_origin(p, toward(ng, q - p));
+            let d = q - origin;
+            let dist = d.dot(d).sqrt();
+            let qa = Vec3x { x: q.x.abs(), y: q.y.abs(), z: q.z.abs() };
+            let margin = (dist * V::splat(1e-4)).vmax(qa.x.vmax(qa.y.vmax(qa.z)) * V::splat(64.0 / 8_388_608.0));
+            s.shadow = (keep & dist.gt(V::splat(2.0) * margin)).bitmask();
+            store3(origin, &mut s.origin);
+            store3(d / dist, &mut s.dir);
+            (dist - margin).store(&mut s.tfar);
+        }
+    }
+    if rows.scatter != 0 {
+        // `bsdf::sample_f` of a diffuse BSDF: `cosine_hemisphere`, then the side of `wo`.
+        let (x, y) = concentric_disk(V::load(&rows.u[0]), V::load(&rows.u[1]));
+        let z = (one - x * x - y * y).vmax(zero).sqrt();
+        let goes = V::from_bitmask(rows.scatter) & !wo_z.eq(zero) & !z.eq(zero);
+        rows.scatter = goes.bitmask();
+        let z = z.copysign(wo_z);
+        // `Frame::to_world` in the frame of `orthonormal_basis(ns)`, then `spawn_ray`.
+        let (tx, ty) = orthonormal_basis(ns);
+        let dir = tx * x + ty * y + ns * z;
+        store3(offset_origin(p, toward(ng, dir)), &mut rows.origin);
+        store3(dir, &mut rows.dir);
+    }
+}
+
+/// `sampling::concentric_disk` per lane.
+#[inline(always)]
+fn concentric_disk<V: Lanes>(u0: V, u1: V) -> (V, V) {
+    let (two, one, zero) = (V::splat(2.0), V::splat(1.0), V::splat(0.0));
+    let (a, b) = (two * u0 - one, two * u1 - one);
+    let wide_a = a.abs().gt(b.abs());
+    let (sin, cos) = sin_cos_quarter(V::splat(FRAC_PI_4) * (wide_a.select(b, a) / wide_a.select(a, b)));
+    let x = wide_a.select(a * cos, b * sin);
+    let y = wide_a.select(a * sin, b * cos);
+    let centre = a.eq(zero) & b.eq(zero);
+    (centre.select(zero, x), centre.select(zero, y))
+}
+
+/// `sampling::sin_cos_quarter` per lane.
+#[inline(always)]
+fn sin_cos_quarter<V: Lanes>(x: V) -> (V, V) {
+    let c = V::splat;
+    let x2 = x * x;
+    let sin =
+        x * (c(1.0) + x2 * (c(-1.0 / 6.0) + x2 * (c(1.0 / 120.0) + x2 * (c(-1.0 / 5040.0) + x2 * c(1.0 / 362_880.0)))));
+    let cos = c(1.0)
+        + x2 * (c(-0.5)
+            + x2 * (c(1.0 / 24.0) + x2 * (c(-1.0 / 720.0) + x2 * (c(1.0 / 40_320.0) + x2 * c(-1.0 / 3_628_800.0)))));
+    (sin, cos)
+}
+
+/// `math::orthonormal_basis` per lane: the tangents of the frame around `n`.
+#[inline(always)]
+fn orthonormal_basis<V: Lanes>(n: Vec3x<V>) -> (Vec3x<V>, Vec3x<V>) {
+    let sign = V::splat(1.0).copysign(n.z);
+    let a = V::splat(-1.0) / (sign + n.z);
+    let b = n.x * n.y * a;
+    (
+        Vec3x { x: V::splat(1.0) + sign * n.x * n.x * a, y: sign * b, z: -sign * n.x },
+        Vec3x { x: b, y: sign + n.y * n.y * a, z: -n.y },
+    )
+}
+
+/// `spawn::toward` per lane.
+#[inline(always)]
+fn toward<V: Lanes>(ng: Vec3x<V>, dir: Vec3x<V>) -> Vec3x<V> {
+    Vec3x::select(ng.dot(dir).lt(V::splat(0.0)), -ng, ng)
+}
+
+/// `spawn::offset_origin` per lane.
+#[inline(always)]
+fn offset_origin<V: Lanes>(p: Vec3x<V>, n: Vec3x<V>) -> Vec3x<V> {
+    #[inline(always)]
+    fn one<V: Lanes>(p: V, n: V) -> V {
+        let near = p.abs().lt(V::splat(crate::render::spawn::ORIGIN));
+        let k = V::splat(crate::render::spawn::INT_SCALE) * n;
+        let stepped = p.add_ulps(p.lt(V::splat(0.0)).select(-k, k));
+        near.select(p + V::splat(crate::render::spawn::FLOAT_SCALE) * n, stepped)
+    }
+    Vec3x { x: one(p.x, n.x), y: one(p.y, n.y), z: one(p.z, n.z) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::sampler::Rng;
+    use crate::render::sampling::cosine_hemisphere;
+    use crate::render::spawn::{spawn_ray, spawn_ray_to};
+
+    fn bits3(v: Vec3) -> [u32; 3] {
+        v.to_array().map(f32::to_bits)
+    }
+
+    /// The lanes' pieces against the one-path functions, bit for bit, on random points,
+    /// normals and uniforms, on every ISA.
+    #[test]
+    fn lanes_equal_the_one_path_functions_on_every_isa() {
+        let mut rng = Rng::new(11, 5);
+        let r3 = |rng: &mut Rng, s: f32| {
+            let mut v = || (rng.next_f32() - 0.5) * s;
+            Vec3::new(v(), v(), v())
+        };
+        let lights = [
+            (
+                Some(LaneLight::Rect {
+                    radiance: Vec3::new(5.0, 4.0, 3.0),
+                    center: Vec3::new(0.0, 1.9, 0.0),
+                    normal: Vec3::NEG_Y,
+                    dim_x: Vec3::new(0.5, 0.0, 0.0),
+                    dim_y: Vec3::new(0.0, 0.0, 0.4),
+                    area: 0.2,
+                }),
+                0,
+            ),
+            (Some(LaneLight::Point { position: Vec3::new(0.3, 1.2, -0.4), intensity: Vec3::new(2.0, 1.0, 0.5) }), 1),
+        ];
+        let sampled: Vec<SampledLight> = lights
+            .iter()
+            .map(|&(l, _)| match l.expect("lane lights") {
+                LaneLight::Rect { radiance, center, normal, dim_x, dim_y, area } => {
+                    SampledLight::Rect { radiance, center, normal, dim_x, dim_y, area }
+                }
+                LaneLight::Point { position, intensity } => SampledLight::Point { position, intensity },
+            })
+            .collect();
+        let scene = crate::scene::SceneBuilder::new().commit(&crate::BuildOptions::default()).0;
+        for isa in crate::Isa::available() {
+            for round in 0..200 {
+                let mut rows = StepRows { direct: 0xFF, scatter: 0xFF, reflects: 0xFF, ..Default::default() };
+                let mut samples = [SampleLanes::default(); 2];
+                let mut want = Vec::new();
+                for j in 0..STEP {
+                    // Points near and far from the origin (both branches of the offset), some on the light.
+                    let scale = [0.01, 1.0, 3.0, 1e4][(round + j) % 4];
+                    let p = if round % 17 == 3 && j == 2 { Vec3::new(0.0, 1.9, 0.0) } else { r3(&mut rng, scale) };
+                    let ng = r3(&mut rng, 2.0).normalize();
+                    let ns = if j % 3 == 0 { ng } else { (ng + r3(&mut rng, 0.6)).normalize() };
+                    let dir = r3(&mut rng, 2.0).normalize();
+                    let wo_z = (-dir).dot(ns);
+                    for c in 0..3 {
+                        (rows.p[c][j], rows.ng[c][j], rows.ns[c][j]) = (p[c], ng[c], ns[c]);
+                    }
+                    rows.wo_z[j] = wo_z;
+                    let frame = crate::render::frame::Frame::from_normal(ns);
+                    assert_eq!(frame.to_local(-dir).z.to_bits(), wo_z.to_bits());
+                    let ub = (rng.next_f32(), rng.next_f32());
+                    (rows.u[0][j], rows.u[1][j]) = ub;
+                    let mut per_light = Vec::new();
+                    for (i, light) in sampled.iter().enumerate() {
+                        let u = (rng.next_f32(), rng.next_f32());
+                        (samples[i].u[0][j], samples[i].u[1][j]) = u;
+                        let ctx = crate::render::light::LightContext { p, n: ns };
+                        per_light.push(light.sample(&scene, &ctx, u).and_then(|ls| {
+                            let wi_z = frame.to_local(ls.wi).z;
+                            (wo_z * wi_z > 0.0 && ls.pdf > 0.0).then(|| {
+                                let shadow = spawn_ray_to(p, ng, ls.point.expect("a point"));
+                                (wi_z.abs() / ls.pdf, ls.radiance, shadow)
+                            })
+                        }));
+                    }
+                    let bounce = (wo_z != 0.0)
+                        .then(|| {
+                            let mut wi = cosine_hemisphere(ub);
+                            (wi.z != 0.0).then(|| {
+                                wi.z = wi.z.copysign(wo_z);
+                                spawn_ray(p, ng, frame.to_world(wi))
+                            })
+                        })
+                        .flatten();
+                    want.push((per_light, bounce));
+                }
+                dispatch(isa, Step { rows: &mut rows, lights: &lights, samples: &mut samples });
+                let lane3 = |r: &Rows<3>, j: usize| Vec3::new(r[0][j], r[1][j], r[2][j]);
+                for (j, (per_light, bounce)) in want.iter().enumerate() {
+                    for (i, w) in per_light.iter().enumerate() {
+                        let s = &samples[i];
+                        assert_eq!(s.keep >> j & 1 != 0, w.is_some(), "{isa:?} round {round} lane {j} light {i}");
+                        let Some((scale, radiance, shadow)) = w else { continue };
+                        assert_eq!(s.scale[j].to_bits(), scale.to_bits(), "{isa:?} round {round} lane {j}");
+                        if matches!(lights[i].0, Some(LaneLight::Point { .. })) {
+                            assert_eq!(bits3(lane3(&s.radiance, j)), bits3(*radiance));
+                        }
+                        assert_eq!(s.shadow >> j & 1 != 0, shadow.is_some(), "{isa:?} round {round} lane {j}");
+                        if let Some(r) = shadow {
+                            assert_eq!(bits3(lane3(&s.origin, j)), bits3(r.origin), "{isa:?} round {round} lane {j}");
+                            assert_eq!(bits3(lane3(&s.dir, j)), bits3(r.dir));
+                            assert_eq!(s.tfar[j].to_bits(), r.tfar.to_bits());
+                        }
+                    }
+                    assert_eq!(rows.scatter >> j & 1 != 0, bounce.is_some(), "{isa:?} round {round} lane {j}");
+                    if let Some(r) = bounce {
+                        assert_eq!(bits3(lane3(&rows.origin, j)), bits3(r.origin), "{isa:?} round {round} lane {j}");
+                        assert_eq!(bits3(lane3(&rows.dir, j)), bits3(r.dir), "{isa:?} round {round} lane {j}");
+                    }
+                }
+            }
+        }
+    }
+
+    /// Whole batches through the wavefront with the lanes and without (every hit one path at
+    /// a time): the same radiance bit for bit, in the built-in Cornell box (diffuse walls
+    /// beside a mirror and a glass sphere, so steps mix lanes and single paths) lit by its
+    /// area light and a point light, with several light samples, every integrator view and
+    /// Russian roulette on and off.
+    #[test]
+    fn wavefront_radiance_is_the_same_without_lanes() {
+        use crate::render::stats::RayLog;
+        use crate::render::wavefront::{PhaseTimes, StreamOrder, Wavefront};
+        use crate::render::{IntegratorKind, RenderSettings};
+        let mut builder = crate::io::default_scene();
+        let centre = builder.bounds().center();
+        builder.add_light(crate::scene::Light::Point { position: centre + Vec3::Y * 0.3, intensity: Vec3::splat(0.4) });
+        let (scene, _) = builder.commit(&crate::BuildOptions::default());
+        let kinds =
+            [IntegratorKind::Global, IntegratorKind::Direct, IntegratorKind::IndirectOnly, IntegratorKind::Bounce];
+        for (case, kind) in kinds.into_iter().enumerate() {
+            let settings = RenderSettings {
+                integrator: kind,
+                max_depth: 6,
+                light_samples: 1 + case as u32 % 3,
+                russian_roulette: case != 3,
+                ..Default::default()
+            };
+            let radiance = |lanes: bool| {
+                let mut integrator = Integrator::new(&scene, &settings);
+                let kinds = integrator.lane_lights.as_ref().map(|l| l.samples.iter().map(|s| s.0.is_some()).collect());
+                // The area light and the point light in the lanes, the emissive lamp quad not.
+                assert_eq!(kinds.map(|k: Vec<bool>| (k.contains(&true), k.contains(&false))), Some((true, true)));
+                if !lanes {
+                    integrator.lane_lights = None;
+                }
+                let mut wf = Wavefront::new();
+                wf.reserve(3000, &integrator);
+                let mut dirs = Rng::new(case as u64, 1);
+                for i in 0..3000 {
+                    wf.push_path(Rng::new(7, i));
+                    let d = Vec3::new(dirs.next_f32() - 0.5, dirs.next_f32() - 0.5, dirs.next_f32() - 0.5);
+                    wf.push_camera_ray(Ray::new(centre, d));
+                }
+                let (mut log, mut times) = (RayLog::default(), PhaseTimes::default());
+                wf.run(&integrator, StreamOrder::default(), &mut log, &mut times);
+                wf.radiance().map(|l| l.to_array().map(f32::to_bits)).collect::<Vec<_>>()
+            };
+            let (with, without) = (radiance(true), radiance(false));
+            assert!(with.iter().filter(|l| **l != [0; 3]).count() > 300, "{kind:?}: many paths bring light");
+            assert_eq!(with, without, "{kind:?}");
+        }
+    }
+}
