@@ -2,7 +2,9 @@
 //! `PathIntegrator` without multiple importance sampling).
 //!
 //! A path advances one bounce at a time, in two steps the wavefront ([`super::wavefront`])
-//! takes for each path of a batch in turn: [`Integrator::shade`] and [`Integrator::scatter`];
+//! takes for each path of a batch in turn: [`Integrator::shade`] and [`Integrator::scatter`]
+//! (for diffuse hits under light sampling, eight paths at a time in SIMD lanes with the same
+//! results: [`Integrator::shade_lanes`], module `lanes`);
 //! the rays they ask for are traced after the whole batch's bounce, many paths' at once. At each non-specular
 //! hit, direct lighting is estimated either by sampling the lights (`-l` samples per area
 //! light, one per delta light) and tracing shadow rays, or (`-H`) by tracing uniformly

@@ -9,7 +9,9 @@
 //! 3. *shade*: each hit adds its emission, queues its direct-lighting samples (shadow rays, or
 //!    hemisphere rays under `-H`), samples its BSDF and plays Russian roulette
 //!    ([`Integrator::shade`], then [`Integrator::scatter`] for the same path), writing the
-//!    continuation ray in place of the ray shaded;
+//!    continuation ray in place of the ray shaded; the wave goes in steps of eight, whose
+//!    diffuse hits are shaded together in SIMD lanes ([`Integrator::shade_lanes`], the same
+//!    results bit for bit);
 //! 4. *trace* the shadow rays of the whole batch as one occlusion stream (and the hemisphere
 //!    rays as one closest-hit stream), add each point's direct lighting
 //!    ([`Integrator::direct_total`]);
