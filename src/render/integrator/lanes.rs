@@ -1,7 +1,8 @@
 //! Shading eight paths at a time: [`Integrator::shade`] and [`Integrator::scatter`] for the
-//! common case, a diffuse surface lit through light sampling by rectangle and point lights,
-//! with the arithmetic in SIMD lanes on the scene's ISA (dispatched as the tracing kernels
-//! are) and the operations of the one-path code in the same order. Every path's radiance,
+//! common case, a diffuse surface under light sampling, with the arithmetic in SIMD lanes on
+//! the scene's ISA (dispatched as the tracing kernels are) and the operations of the one-path
+//! code in the same order. Rectangle and point lights are sampled in the lanes, other kinds
+//! one path at a time with the uniforms drawn for them. Every path's radiance,
 //! random numbers, direct samples and rays are therefore bit-identical to shading it alone
 //! (unit test on every ISA, and the same images).
 //!
