@@ -252,23 +252,34 @@ impl<'a> Integrator<'a> {
         let rng = &mut path.rng;
         let bsdf = &self.scene.materials[s.material as usize].bsdf;
         let bs = bsdf::sample_f(bsdf, wo, rng.next_2d(), rng.next_f32())?;
-        path.beta *= bs.weight;
-        path.eta_scale *= bs.eta_scale;
-        if path.beta.max_element() <= 0.0 {
+        if !self.continue_path(path, bs.weight, bs.eta_scale, bs.delta) {
             return None;
         }
+        Some(spawn_ray(s.position, s.geometric_normal, frame.to_world(bs.wi)))
+    }
+
+    /// The end of a scattering step once the BSDF sample (weight `weight`, radiance scaling
+    /// `eta_scale`, `delta` for a specular lobe) is drawn: multiplies `path`'s throughput,
+    /// counts the bounce and plays Russian roulette. False when the path ends here.
+    #[inline]
+    fn continue_path(&self, path: &mut PathState, weight: Vec3, eta_scale: f32, delta: bool) -> bool {
+        path.beta *= weight;
+        path.eta_scale *= eta_scale;
+        if path.beta.max_element() <= 0.0 {
+            return false;
+        }
         path.depth += 1;
-        path.sees_emission = bs.delta;
+        path.sees_emission = delta;
         if self.settings.russian_roulette && path.depth >= ROULETTE_START {
             let q = (path.beta * path.eta_scale).max_element();
             if q < 1.0 {
-                if rng.next_f32() >= q {
-                    return None;
+                if path.rng.next_f32() >= q {
+                    return false;
                 }
                 path.beta /= q;
             }
         }
-        Some(spawn_ray(s.position, s.geometric_normal, frame.to_world(bs.wi)))
+        true
     }
 
     /// The direct lighting of one shading point from its samples `samples`, in the order

@@ -66,9 +66,9 @@ impl IsaOp for Surfaces<'_> {
 #[inline(always)]
 fn triangle_surfaces<V: Lanes>(tris: &TrianglesSoa, hits: &[Hit; STEP], triangles: u32, out: &mut [SurfaceHit; STEP]) {
     debug_assert_eq!(V::LANES, STEP);
-    // Rows: the corners a, b, c (x, y, z each), then their normals; lanes of other hits
+    // Rows (x, y, z each): the corners a, b, c, then their normals; lanes of other hits
     // stay zero and their results are dropped.
-    let mut rows = [[0.0f32; STEP]; 18];
+    let mut rows = [[[0.0f32; STEP]; 3]; 6];
     let (mut u, mut v) = ([0.0f32; STEP], [0.0f32; STEP]);
     let smooth = !tris.normals.is_empty();
     for j in crate::simd::bits(triangles) {
@@ -76,15 +76,15 @@ fn triangle_surfaces<V: Lanes>(tris: &TrianglesSoa, hits: &[Hit; STEP], triangle
         let corners = tris.indices[h.prim as usize];
         for (c, &i) in corners.iter().enumerate() {
             let p = tris.positions[i as usize];
-            (rows[3 * c][j], rows[3 * c + 1][j], rows[3 * c + 2][j]) = (p.x, p.y, p.z);
+            (rows[c][0][j], rows[c][1][j], rows[c][2][j]) = (p.x, p.y, p.z);
             if smooth {
                 let n = tris.normals[i as usize];
-                (rows[9 + 3 * c][j], rows[10 + 3 * c][j], rows[11 + 3 * c][j]) = (n.x, n.y, n.z);
+                (rows[3 + c][0][j], rows[3 + c][1][j], rows[3 + c][2][j]) = (n.x, n.y, n.z);
             }
         }
         (u[j], v[j]) = (h.u, h.v);
     }
-    let (a, b, c) = (row::<V>(&rows, 0), row::<V>(&rows, 3), row::<V>(&rows, 6));
+    let (a, b, c) = (Vec3x::<V>::load_rows(&rows[0]), Vec3x::load_rows(&rows[1]), Vec3x::load_rows(&rows[2]));
     let (u, v) = (V::load(&u), V::load(&v));
     let w = V::splat(1.0) - u - v;
     let position = barycentric(a, b, c, w, u, v);
@@ -92,29 +92,24 @@ fn triangle_surfaces<V: Lanes>(tris: &TrianglesSoa, hits: &[Hit; STEP], triangle
     let ng = Vec3x::select(ng_ok, ng, Vec3x::splat(Vec3::Z));
     let mut ns = ng;
     if smooth {
-        let (i, i_ok) = normalized(barycentric(row(&rows, 9), row(&rows, 12), row(&rows, 15), w, u, v));
+        let (na, nb, nc) = (Vec3x::load_rows(&rows[3]), Vec3x::load_rows(&rows[4]), Vec3x::load_rows(&rows[5]));
+        let (i, i_ok) = normalized(barycentric(na, nb, nc, w, u, v));
         let i = Vec3x::select(i.dot(ng).lt(V::splat(0.0)), -i, i);
         ns = Vec3x::select(i_ok, i, ng);
     }
-    let mut lanes = [[0.0f32; STEP]; 9];
-    for (k, x) in [position.x, position.y, position.z, ng.x, ng.y, ng.z, ns.x, ns.y, ns.z].into_iter().enumerate() {
-        x.store(&mut lanes[k]);
-    }
+    let mut lanes = [[[0.0f32; STEP]; 3]; 3];
+    position.store_rows(&mut lanes[0]);
+    ng.store_rows(&mut lanes[1]);
+    ns.store_rows(&mut lanes[2]);
     for j in crate::simd::bits(triangles) {
-        let l = |k: usize| Vec3::new(lanes[k][j], lanes[k + 1][j], lanes[k + 2][j]);
+        let l = |k: usize| Vec3::new(lanes[k][0][j], lanes[k][1][j], lanes[k][2][j]);
         out[j] = SurfaceHit {
             position: l(0),
-            geometric_normal: l(3),
-            shading_normal: l(6),
+            geometric_normal: l(1),
+            shading_normal: l(2),
             material: tris.material[hits[j].prim as usize],
         };
     }
-}
-
-/// Rows `k`, `k + 1`, `k + 2` of `rows` as a vector of lanes.
-#[inline(always)]
-fn row<V: Lanes>(rows: &[[f32; STEP]; 18], k: usize) -> Vec3x<V> {
-    Vec3x { x: V::load(&rows[k]), y: V::load(&rows[k + 1]), z: V::load(&rows[k + 2]) }
 }
 
 /// `a w + b u + c v`, summed in the order of `Scene::surface`.

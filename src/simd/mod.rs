@@ -164,6 +164,21 @@ impl<V: Lanes> Vec3x<V> {
         self.x * o.x + self.y * o.y + self.z * o.z
     }
 
+    /// The vectors whose `x`, `y` and `z` are rows 0, 1 and 2 of `rows` (each at least
+    /// `V::LANES` long).
+    #[inline(always)]
+    pub fn load_rows<const N: usize>(rows: &[[f32; N]; 3]) -> Self {
+        Self { x: V::load(&rows[0]), y: V::load(&rows[1]), z: V::load(&rows[2]) }
+    }
+
+    /// Stores `x`, `y` and `z` into rows 0, 1 and 2 of `rows`.
+    #[inline(always)]
+    pub fn store_rows<const N: usize>(self, rows: &mut [[f32; N]; 3]) {
+        self.x.store(&mut rows[0]);
+        self.y.store(&mut rows[1]);
+        self.z.store(&mut rows[2]);
+    }
+
     /// Lanes of `t` where `mask` is true, of `f` elsewhere.
     #[inline(always)]
     pub fn select(mask: V, t: Self, f: Self) -> Self {

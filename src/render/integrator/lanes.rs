@@ -12,7 +12,7 @@
 //! continuation ray. The lanes compute the shading frame, the light samples and their shadow
 //! rays, the cosine-weighted bounce direction and the continuation's origin.
 
-use super::{Frame, Integrator, PathState, ROULETTE_START};
+use super::{Frame, Integrator, PathState};
 use crate::math::Vec3;
 use crate::ray::{Hit, Ray};
 use crate::render::light::SampledLight;
@@ -44,6 +44,8 @@ enum LaneLight {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct LaneLights {
     samples: Vec<(Option<LaneLight>, u32)>,
+    /// True when every sample is taken in the lanes.
+    all_lanes: bool,
 }
 
 impl LaneLights {
@@ -61,12 +63,8 @@ impl LaneLights {
             };
             samples.extend(std::iter::repeat_n((lane, group as u32), n as usize));
         }
-        Self { samples }
-    }
-
-    /// True when every light is sampled in the lanes.
-    fn all_lanes(&self) -> bool {
-        self.samples.iter().all(|s| s.0.is_some())
+        let all_lanes = samples.iter().all(|s| s.0.is_some());
+        Self { samples, all_lanes }
     }
 
     /// Samples per shading point.
@@ -217,7 +215,7 @@ impl Integrator<'_> {
             if rows.direct >> j & 1 != 0 {
                 direct.begin(id, path.beta);
                 // The frame of the lights sampled one path at a time.
-                let at = (!lights.all_lanes()).then(|| {
+                let at = (!lights.all_lanes).then(|| {
                     let frame = Frame::from_normal(e.surfaces[k].shading_normal);
                     (frame, frame.to_local(-e.rays[k].dir))
                 });
@@ -252,29 +250,10 @@ impl Integrator<'_> {
                         .push_light(DirectSample { f, radiance, scale: sample.scale[j], group, visible: true }, shadow);
                 }
             }
-            let mut alive = false;
-            if rows.scatter >> j & 1 != 0 {
-                // `Integrator::scatter` after `bsdf::sample_f` (weight `albedo`, not delta).
-                path.beta *= albedo;
-                path.eta_scale *= 1.0;
-                if path.beta.max_element() > 0.0 {
-                    path.depth += 1;
-                    path.sees_emission = false;
-                    alive = true;
-                    if self.settings.russian_roulette && path.depth >= ROULETTE_START {
-                        let q = (path.beta * path.eta_scale).max_element();
-                        if q < 1.0 {
-                            if path.rng.next_f32() >= q {
-                                alive = false;
-                            } else {
-                                path.beta /= q;
-                            }
-                        }
-                    }
-                }
-                if alive {
-                    e.rays[k] = Ray::new(lane3(&rows.origin, j), lane3(&rows.dir, j));
-                }
+            // `Integrator::scatter` after `bsdf::sample_f` (weight `albedo`, not delta).
+            let alive = rows.scatter >> j & 1 != 0 && self.continue_path(path, albedo, 1.0, false);
+            if alive {
+                e.rays[k] = Ray::new(lane3(&rows.origin, j), lane3(&rows.dir, j));
             }
             e.alive[k] = alive;
         }
@@ -296,25 +275,13 @@ impl IsaOp for Step<'_> {
     }
 }
 
-#[inline(always)]
-fn load3<V: Lanes>(r: &Rows<3>) -> Vec3x<V> {
-    Vec3x { x: V::load(&r[0]), y: V::load(&r[1]), z: V::load(&r[2]) }
-}
-
-#[inline(always)]
-fn store3<V: Lanes>(v: Vec3x<V>, r: &mut Rows<3>) {
-    v.x.store(&mut r[0]);
-    v.y.store(&mut r[1]);
-    v.z.store(&mut r[2]);
-}
-
 /// The light samples of `rows.direct`'s lanes (into `samples`, one per entry of `lights`) and
 /// the bounce of `rows.scatter`'s lanes; `rows.scatter` keeps the lanes whose bounce carries
 /// light.
 #[inline(always)]
 fn step<V: Lanes>(rows: &mut StepRows, lights: &[(Option<LaneLight>, u32)], samples: &mut [SampleLanes]) {
     debug_assert_eq!(V::LANES, STEP);
-    let (p, ng, ns) = (load3::<V>(&rows.p), load3::<V>(&rows.ng), load3::<V>(&rows.ns));
+    let (p, ng, ns) = (Vec3x::<V>::load_rows(&rows.p), Vec3x::load_rows(&rows.ng), Vec3x::load_rows(&rows.ns));
     let wo_z = V::load(&rows.wo_z);
     let (zero, one) = (V::splat(0.0), V::splat(1.0));
     if rows.direct != 0 {
@@ -347,7 +314,7 @@ fn step<V: Lanes>(rows: &mut StepRows, lights: &[(Option<LaneLight>, u32)], samp
             let keep = carries & gathers & (wo_z * wi_z).gt(zero) & pdf.gt(zero);
             s.keep = keep.bitmask();
             (wi_z.abs() / pdf).store(&mut s.scale);
-            store3(radiance, &mut s.radiance);
+            radiance.store_rows(&mut s.radiance);
             // `spawn_ray_to(p, ng, q)`.
             let origin = offset_origin(p, toward(ng, q - p));
             let d = q - origin;
@@ -355,8 +322,8 @@ fn step<V: Lanes>(rows: &mut StepRows, lights: &[(Option<LaneLight>, u32)], samp
             let qa = Vec3x { x: q.x.abs(), y: q.y.abs(), z: q.z.abs() };
             let margin = (dist * V::splat(1e-4)).vmax(qa.x.vmax(qa.y.vmax(qa.z)) * V::splat(64.0 / 8_388_608.0));
             s.shadow = (keep & dist.gt(V::splat(2.0) * margin)).bitmask();
-            store3(origin, &mut s.origin);
-            store3(d / dist, &mut s.dir);
+            origin.store_rows(&mut s.origin);
+            (d / dist).store_rows(&mut s.dir);
             (dist - margin).store(&mut s.tfar);
         }
     }
@@ -370,8 +337,8 @@ fn step<V: Lanes>(rows: &mut StepRows, lights: &[(Option<LaneLight>, u32)], samp
         // `Frame::to_world` in the frame of `orthonormal_basis(ns)`, then `spawn_ray`.
         let (tx, ty) = orthonormal_basis(ns);
         let dir = tx * x + ty * y + ns * z;
-        store3(offset_origin(p, toward(ng, dir)), &mut rows.origin);
-        store3(dir, &mut rows.dir);
+        offset_origin(p, toward(ng, dir)).store_rows(&mut rows.origin);
+        dir.store_rows(&mut rows.dir);
     }
 }
 
