@@ -191,15 +191,23 @@ impl<T: TriBlock> Bvh8<T> {
         s
     }
 
-    /// The primitive ids held by leaf `r`, padding lanes excluded.
+    /// The primitive ids held by leaf `r`: its lanes of its blocks ([`NodeRef::lane_mask`]),
+    /// padding lanes excluded.
     pub fn leaf_prims(&self, r: NodeRef) -> Vec<u32> {
         let range = r.blocks();
-        match r.kind() {
-            LeafKind::Triangles => {
-                self.tris[range].iter().flat_map(|b| (0..T::M).map(|l| b.prim(l))).filter(|&p| p != u32::MAX).collect()
-            }
-            LeafKind::Spheres => self.spheres[range].iter().flat_map(|b| b.prim).filter(|&p| p != u32::MAX).collect(),
-        }
+        let ids: Vec<u32> = match r.kind() {
+            LeafKind::Triangles => self.tris[range]
+                .iter()
+                .enumerate()
+                .flat_map(|(k, b)| crate::simd::bits(r.lane_mask(k, T::M)).map(|l| b.prim(l)))
+                .collect(),
+            LeafKind::Spheres => self.spheres[range]
+                .iter()
+                .enumerate()
+                .flat_map(|(k, b)| crate::simd::bits(r.lane_mask(k, Sphere4::M)).map(|l| b.prim[l]))
+                .collect(),
+        };
+        ids.into_iter().filter(|&p| p != u32::MAX).collect()
     }
 }
 

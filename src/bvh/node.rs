@@ -35,9 +35,12 @@ pub enum LeafKind {
 /// Bit layout, from the most significant bit:
 /// * bit 63: leaf flag;
 /// * inner: bits 0..32 hold the node index into `Bvh8::nodes`;
-/// * leaf: bit 62 is set for sphere blocks, bits 48..53 hold the number of used lanes of
-///   the last block (all earlier blocks are full), bits 32..48 the number of blocks (at
-///   least 1), bits 0..32 the index of the first block;
+/// * leaf: bit 62 is set for sphere blocks, bits 53..58 hold the lane the leaf starts at in
+///   its first block, bits 48..53 the number of lanes it uses in its last block, bits 32..48
+///   the number of blocks (at least 1), bits 0..32 the index of the first block. A leaf of
+///   one block uses lanes `first_lane .. first_lane + last lanes` of it, so that the small
+///   leaves of a node can share a block (see [`crate::bvh::collapse`]); a leaf of several
+///   blocks starts at lane 0 and fills all blocks but its last;
 /// * empty: all bits set ([`NodeRef::EMPTY`]); never dereferenced because the slot's box can
 ///   never be hit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, bytemuck::Pod, bytemuck::Zeroable)]
@@ -46,6 +49,7 @@ pub struct NodeRef(pub u64);
 
 const LEAF_BIT: u64 = 1 << 63;
 const SPHERE_BIT: u64 = 1 << 62;
+const FIRST_LANE_SHIFT: u32 = 53;
 
 impl NodeRef {
     /// An unused child slot.
@@ -67,6 +71,15 @@ impl NodeRef {
         assert!((1..=16).contains(&last_lanes), "{last_lanes} lanes");
         let kind = if kind == LeafKind::Spheres { SPHERE_BIT } else { 0 };
         NodeRef(LEAF_BIT | kind | ((last_lanes as u64) << 48) | ((count as u64) << 32) | first as u64)
+    }
+
+    /// A leaf of `lanes` primitives in lanes `first_lane .. first_lane + lanes` of block
+    /// `block` (the other lanes may belong to other leaves).
+    #[inline]
+    pub fn leaf_in_block(kind: LeafKind, block: u32, first_lane: usize, lanes: usize) -> Self {
+        assert!(first_lane + lanes <= 16, "lanes {first_lane}..{} of a block", first_lane + lanes);
+        let r = Self::leaf(kind, block, 1, lanes);
+        NodeRef(r.0 | (first_lane as u64) << FIRST_LANE_SHIFT)
     }
 
     /// True for leaves (and for [`NodeRef::EMPTY`]).
@@ -105,10 +118,23 @@ impl NodeRef {
         self.first_block()..self.first_block() + self.block_count()
     }
 
-    /// Used lanes of block `k` of a leaf (all lanes but in the last block).
+    /// Lane the leaf starts at in its first block (0 for leaves of several blocks).
+    #[inline(always)]
+    pub fn first_lane(self) -> usize {
+        ((self.0 >> FIRST_LANE_SHIFT) & 0x1F) as usize
+    }
+
+    /// Number of lanes the leaf uses in block `k` of its run (all `m` but in the last block).
     #[inline(always)]
     pub fn lanes_of_block(self, k: usize, m: usize) -> usize {
         if k + 1 == self.block_count() { ((self.0 >> 48) & 0x1F) as usize } else { m }
+    }
+
+    /// Bit mask of the lanes the leaf uses in block `k` of its run, blocks of `m` lanes.
+    #[inline(always)]
+    pub fn lane_mask(self, k: usize, m: usize) -> u32 {
+        let start = if k == 0 { self.first_lane() } else { 0 };
+        ((1u32 << self.lanes_of_block(k, m)) - 1) << start
     }
 
     /// What the blocks of a leaf hold.
@@ -223,9 +249,13 @@ mod tests {
         assert!(r.is_leaf() && !r.is_empty());
         assert_eq!((r.kind(), r.first_block(), r.block_count()), (LeafKind::Spheres, 123_456, 7));
         assert_eq!((r.lanes_of_block(0, 4), r.lanes_of_block(6, 4)), (4, 3));
+        assert_eq!((r.lane_mask(0, 4), r.lane_mask(6, 4), r.first_lane()), (0b1111, 0b111, 0));
         let r = NodeRef::leaf(LeafKind::Triangles, u32::MAX - 1, 1, 16);
         assert_eq!(r.lanes_of_block(0, 16), 16);
         assert_eq!((r.kind(), r.first_block(), r.block_count()), (LeafKind::Triangles, u32::MAX as usize - 1, 1));
+        let r = NodeRef::leaf_in_block(LeafKind::Triangles, 77, 5, 3);
+        assert_eq!((r.first_block(), r.block_count(), r.first_lane()), (77, 1, 5));
+        assert_eq!((r.lanes_of_block(0, 8), r.lane_mask(0, 8)), (3, 0b1110_0000));
         let n = NodeRef::inner(42);
         assert!(!n.is_leaf() && n.node_index() == 42);
         assert!(NodeRef::EMPTY.is_empty() && NodeRef::EMPTY.is_leaf());

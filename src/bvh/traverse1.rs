@@ -21,7 +21,10 @@
 //
 //! Leaves are runs of SoA blocks tested one ray against all M triangles at once
 //! ([`crate::geometry::tri_block`]) with the BVH's [`TriangleKernel`] `P` (Möller–Trumbore
-//! or watertight), chosen once per query.
+//! or watertight), chosen once per query. A block may hold the triangles of several small
+//! leaves of one node ([`NodeRef::lane_mask`]); the single-ray kernels test all its lanes
+//! whichever leaf they enter by, which costs nothing (one test either way) and is exact: every
+//! lane is a triangle of the scene, so a hit found there is a true hit, found early.
 //!
 //! The kernels are generic over the ISA's lanes `I` ([`IsaLanes`]) and a work [`Counter`]
 //! `C`, and `#[inline(always)]`: the entry points of [`crate::bvh::queries`] instantiate

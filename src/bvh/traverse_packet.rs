@@ -233,7 +233,7 @@ impl<V: Lanes> PacketRays<V> {
         let range = leaf.blocks();
         if leaf.kind() == LeafKind::Spheres {
             for (k, block) in bvh.spheres[range].iter().enumerate() {
-                for lane in 0..leaf.lanes_of_block(k, 4) {
+                for lane in crate::simd::bits(leaf.lane_mask(k, 4)) {
                     let c = Vec3x::splat(block.center(lane));
                     let (m, t) =
                         sphere_lanes(&self.org, &self.dir, self.tnear, self.tfar, &c, V::splat(block.radius[lane]));
@@ -293,7 +293,7 @@ impl<V: Lanes> PacketRays<V> {
             }
             LeafKind::Spheres => {
                 for (k, block) in bvh.spheres[range].iter().enumerate() {
-                    for lane in 0..leaf.lanes_of_block(k, 4) {
+                    for lane in crate::simd::bits(leaf.lane_mask(k, 4)) {
                         let c = Vec3x::splat(block.center(lane));
                         let (m, _) =
                             sphere_lanes(&self.org, &self.dir, self.tnear, self.tfar, &c, V::splat(block.radius[lane]));
@@ -474,7 +474,7 @@ pub struct OccluderCache {
 /// Packet leaves: skip triangles whose (padded) boxes the frustum misses.
 const TRIANGLE_CULL: bool = true;
 
-/// Bit mask of the lanes of `block` (block `k` of `leaf`) a packet tests: the used lanes,
+/// Bit mask of the lanes of `block` (block `k` of `leaf`) a packet tests: the leaf's lanes,
 /// less the triangles the frustum `fr` misses (when culling applies to a block this full).
 #[inline(always)]
 fn lanes_to_test<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
@@ -484,10 +484,9 @@ fn lanes_to_test<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
     fr: Option<&Frustum<I::F8>>,
     counter: &mut C,
 ) -> u32 {
-    let lanes = leaf.lanes_of_block(k, T::M);
-    let mut todo = (1u32 << lanes) - 1;
+    let mut todo = leaf.lane_mask(k, T::M);
     if TRIANGLE_CULL
-        && lanes >= 4
+        && todo.count_ones() >= 4
         && let Some(f) = fr
     {
         todo &= f.intersect_triangles::<T, T::Lanes<I>>(block, P::TEST);

@@ -8,7 +8,8 @@
 //! * [`validate_bvh2`] and [`validate_bvh8`]: those, plus the geometry. Every box holds its
 //!   children's boxes; every primitive is referenced, never twice by one leaf, and the boxes
 //!   of the leaves that reference it together hold its box (once, in a tree without spatial
-//!   splits, whose leaf box then holds it whole; with them, each leaf holds a part); padding
+//!   splits, whose leaf box then holds it whole; with them, each leaf holds a part); each
+//!   used lane of a block belongs to exactly one leaf (small leaves may share a block); padding
 //!   lanes are inert. For tests and `raypack info --validate`.
 //!
 //! Both builders store children after their parent (depth-first order), which the index checks
@@ -98,7 +99,9 @@ pub fn check_bvh8_indices<T: TriBlock>(b8: &Bvh8<T>, num_prims: usize) -> Result
                     LeafKind::Spheres => (b8.spheres.len(), Sphere4::M),
                 };
                 let last = c.lanes_of_block(c.block_count().saturating_sub(1), m);
-                if c.block_count() == 0 || c.first_block() + c.block_count() > len || last == 0 || last > m {
+                let lanes_ok = if c.block_count() == 1 { c.first_lane() + last <= m } else { c.first_lane() == 0 };
+                if c.block_count() == 0 || c.first_block() + c.block_count() > len || last == 0 || last > m || !lanes_ok
+                {
                     return Err(format!("node {i} has leaf {k} out of range"));
                 }
             }
@@ -145,6 +148,8 @@ pub fn validate_bvh8<T: TriBlock>(bvh: &Bvh8<T>, prim_bounds: &[Aabb]) -> Result
     // never hit.
     let mut cover = Coverage::new(prim_bounds);
     let mut reached = vec![false; bvh.nodes.len()];
+    // The lanes each leaf claims, per block: no lane claimed twice, every used lane claimed.
+    let mut claimed = (vec![0u32; bvh.tris.len()], vec![0u32; bvh.spheres.len()]);
     let mut stack = vec![0usize];
     while let Some(i) = stack.pop() {
         reached[i] = true;
@@ -165,8 +170,30 @@ pub fn validate_bvh8<T: TriBlock>(bvh: &Bvh8<T>, prim_bounds: &[Aabb]) -> Result
                 stack.push(k);
                 continue;
             }
+            let (claims, m) = match c.kind() {
+                LeafKind::Triangles => (&mut claimed.0, T::M),
+                LeafKind::Spheres => (&mut claimed.1, Sphere4::M),
+            };
+            for (k, block) in c.blocks().enumerate() {
+                let lanes = c.lane_mask(k, m);
+                if claims[block] & lanes != 0 {
+                    return Err(format!(
+                        "leaf in slot {slot} of node {i} claims lanes of block {block} another leaf holds"
+                    ));
+                }
+                claims[block] |= lanes;
+            }
             cover.leaf(&b, bvh.leaf_prims(c)).map_err(|e| format!("leaf in slot {slot} of node {i}: {e}"))?;
         }
+    }
+    let used_tri = |b: &T| (0..T::M).filter(|&l| b.prim(l) != u32::MAX).fold(0u32, |m, l| m | 1 << l);
+    let used_sphere = |b: &Sphere4| (0..Sphere4::M).filter(|&l| b.prim[l] != u32::MAX).fold(0u32, |m, l| m | 1 << l);
+    let unclaimed = |used: u32, claims: u32| used & !claims;
+    if let Some(k) = (0..bvh.tris.len()).find(|&k| unclaimed(used_tri(&bvh.tris[k]), claimed.0[k]) != 0) {
+        return Err(format!("triangle block {k} has lanes no leaf holds"));
+    }
+    if let Some(k) = (0..bvh.spheres.len()).find(|&k| unclaimed(used_sphere(&bvh.spheres[k]), claimed.1[k]) != 0) {
+        return Err(format!("sphere block {k} has lanes no leaf holds"));
     }
     if let Some(i) = reached.iter().position(|r| !r) {
         return Err(format!("node {i} unreachable"));
