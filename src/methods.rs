@@ -50,11 +50,16 @@ impl Run<'_> {
 
 /// The kernels of [`crate::kernels::KERNELS`] bound to `scene` (on its ISA).
 pub fn raypack_methods(scene: &Scene) -> Vec<Method<'_>> {
+    raypack_methods_named(scene, "")
+}
+
+/// [`raypack_methods`] with `suffix` (e.g. ` (high)`) appended to every name.
+pub fn raypack_methods_named<'a>(scene: &'a Scene, suffix: &str) -> Vec<Method<'a>> {
     KERNELS
         .iter()
         .map(|k| Method {
             tracer: "raypack",
-            name: k.name.to_string(),
+            name: format!("{}{suffix}", k.name),
             run: match k.query {
                 Query::Intersect(f) => Run::Intersect(Box::new(move |r, h| f(scene, r, h))),
                 Query::Occluded(f) => Run::Occluded(Box::new(move |r, o| f(scene, r, o))),

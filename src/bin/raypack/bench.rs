@@ -11,9 +11,9 @@ use crate::machine::{self, CpuTimes, Machine};
 use crate::{BenchArgs, CliError, check_memory, load, print_warnings};
 #[cfg(feature = "embree")]
 use raypack::methods::embree_methods;
-use raypack::methods::{Method, output_for, raypack_methods, trace};
+use raypack::methods::{Method, output_for, raypack_methods_named, trace};
 use raypack::raysets::{self, Checksum};
-use raypack::{BuildOptions, BuildQuality};
+use raypack::{BuildOptions, BuildQuality, SceneBuilder};
 use raypack::{Isa, Scene};
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -271,15 +271,27 @@ fn repetitions(warm_up: Duration) -> usize {
     ((MIN_RUN.as_secs_f64() / one).ceil() as usize).clamp(1, 1000)
 }
 
-/// Times every method on every ray set at every thread count. `scene` was built by the
-/// caller in `raypack_build` (timed there); `log` receives progress lines.
+/// One of raypack's trees to time: the scene built at one quality, and its build figures.
+pub struct RaypackTree {
+    /// The build quality, as in `--quality` (e.g. `medium`).
+    pub quality: String,
+    /// The scene (its BVH built at `quality`).
+    pub scene: Scene,
+    /// Its build time and size.
+    pub build: BuildFigures,
+}
+
+/// Times every method on every ray set at every thread count. The trees in `trees` were built
+/// by the caller (timed there); the first makes the ray sets and the reference checksums, and
+/// when there are several, each tree's method names end in its quality in brackets, as
+/// Embree's do. `log` receives progress lines.
 pub fn run_bench(
     name: &str,
-    scene: &mut Scene,
-    raypack_build: BuildFigures,
+    trees: &mut [RaypackTree],
     settings: &BenchSettings,
     log: &mut dyn FnMut(&str),
 ) -> Result<BenchReport, BenchError> {
+    assert!(!trees.is_empty(), "run_bench needs a tree");
     if settings.width == 0 || settings.height == 0 || settings.runs == 0 {
         return Err(BenchError::Settings("resolution and run count must be positive".into()));
     }
@@ -288,9 +300,12 @@ pub fn run_bench(
         return Err(BenchError::EmbreeNotBuilt);
     }
     if let Some(isa) = settings.isa {
-        scene.set_isa(isa).map_err(|e| BenchError::Settings(e.to_string()))?;
+        for t in trees.iter_mut() {
+            t.scene.set_isa(isa).map_err(|e| BenchError::Settings(e.to_string()))?;
+        }
     }
-    let scene = &*scene;
+    let trees = &*trees;
+    let scene = &trees[0].scene;
     let date = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
     let load_before = machine::load_average();
     let busy_before = machine::busy_fraction(Duration::from_millis(300));
@@ -301,7 +316,7 @@ pub fn run_bench(
         resolution: (settings.width, settings.height),
         runs: settings.runs,
         notes: vec![format!("raypack ISA: {} (CPU's best: {})", scene.isa(), Isa::detected())],
-        build: vec![raypack_build],
+        build: trees.iter().map(|t| t.build.clone()).collect(),
         rows: Vec::new(),
         date,
         machine: machine::machine(),
@@ -350,7 +365,14 @@ pub fn run_bench(
     };
 
     #[cfg_attr(not(feature = "embree"), allow(unused_mut))]
-    let mut methods = raypack_methods(scene);
+    let mut methods = Vec::new();
+    for (k, t) in trees.iter().enumerate() {
+        let suffix = if trees.len() > 1 { format!(" ({})", t.quality) } else { String::new() };
+        // The scalar reference (the binary BVH) is the same whatever the tree: the first's.
+        methods.extend(
+            raypack_methods_named(&t.scene, &suffix).into_iter().filter(|m| k == 0 || !m.name.contains("reference")),
+        );
+    }
     #[cfg(feature = "embree")]
     for e in &embree_scenes {
         methods.extend(embree_methods(e, &format!(" ({})", e.options().quality.name())));
@@ -482,7 +504,12 @@ impl BenchReport {
             .build
             .iter()
             .map(|b| {
-                let what = if b.tracer == "raypack" { "raypack".to_string() } else { format!("Embree {}", b.quality) };
+                let several = self.build.iter().filter(|b| b.tracer == "raypack").count() > 1;
+                let what = match b.tracer {
+                    "raypack" if several => format!("raypack {}", b.quality),
+                    "raypack" => "raypack".to_string(),
+                    _ => format!("Embree {}", b.quality),
+                };
                 format!("{what} {:.3} s ({:.3}-{:.3})", b.seconds, b.seconds_range.0, b.seconds_range.1)
             })
             .collect();
@@ -576,21 +603,21 @@ impl BenchReport {
         }
         let summary = self.summary();
         let with_embree = summary.iter().any(|r| r.embree.is_some());
-        let _ = write!(s, "\n{:<8} {:>3}  {:<28} {:>9}", "rays", "thr", "best raypack", "Mrays/s");
+        let _ = write!(s, "\n{:<8} {:>3}  {:<32} {:>9}", "rays", "thr", "best raypack", "Mrays/s");
         if with_embree {
-            let _ = writeln!(s, "  {:<28} {:>9} {:>6}  {:<13}", "best Embree", "Mrays/s", "ratio", "ratio min-max");
+            let _ = writeln!(s, "  {:<32} {:>9} {:>6}  {:<13}", "best Embree", "Mrays/s", "ratio", "ratio min-max");
         } else {
             let _ = writeln!(s, "  min-max Mrays/s");
         }
         for r in &summary {
             let _ =
-                write!(s, "{:<8} {:>3}  {:<28} {:>9.2}", r.rays, r.threads, r.raypack.method, r.raypack.mrays_per_s);
+                write!(s, "{:<8} {:>3}  {:<32} {:>9.2}", r.rays, r.threads, r.raypack.method, r.raypack.mrays_per_s);
             match (&r.embree, r.ratio(), r.ratio_range()) {
                 (Some(e), Some(ratio), Some((lo, hi))) => {
-                    let _ = writeln!(s, "  {:<28} {:>9.2} {:>5.2}x  {lo:.2}-{hi:.2}x", e.method, e.mrays_per_s, ratio);
+                    let _ = writeln!(s, "  {:<32} {:>9.2} {:>5.2}x  {lo:.2}-{hi:.2}x", e.method, e.mrays_per_s, ratio);
                 }
                 _ if with_embree => {
-                    let _ = writeln!(s, "  {:<28} {:>9} {:>6}  -", "-", "-", "-");
+                    let _ = writeln!(s, "  {:<32} {:>9} {:>6}  -", "-", "-", "-");
                 }
                 _ => {
                     let _ = writeln!(s, "  {:.2}-{:.2}", r.raypack.mrays_per_s_min, r.raypack.mrays_per_s_max);
@@ -763,6 +790,50 @@ impl BenchReport {
     }
 }
 
+/// Builds `builder` with `opts` `--build-runs` times (or loads it from `--bvh-cache`), keeping
+/// the last; returns the scene and its build figures.
+fn build_timed(builder: &SceneBuilder, opts: &BuildOptions, a: &BenchArgs) -> Result<(Scene, BuildFigures), CliError> {
+    // The builds beyond the one kept (not with a BVH cache, whose second "build" is a load).
+    let extra_builds = if a.bvh_cache.is_some() { 0 } else { a.build_runs - 1 };
+    let mut build_times = Vec::with_capacity(a.build_runs);
+    for _ in 0..extra_builds {
+        let b = builder.clone();
+        let t = Instant::now();
+        let built = b.commit(opts);
+        build_times.push(t.elapsed());
+        // Freed outside the timed region, as Embree's scenes are (their build time is
+        // `rtcCommitScene` alone): unmapping a large scene's arrays took tens of milliseconds.
+        drop(built);
+    }
+    let b = builder.clone();
+    let t = Instant::now();
+    let (scene, report) = match a.bvh_cache.as_deref() {
+        None => b.commit(opts),
+        Some(dir) => {
+            let (scene, report, cache) = b.commit_cached(opts, dir);
+            for w in cache.warnings() {
+                eprintln!("[raypack] warning: {w}");
+            }
+            if cache.loaded {
+                eprintln!("[raypack] BVH loaded from {} (the build time below is the load time)", cache.path.display());
+            }
+            (scene, report)
+        }
+    };
+    build_times.push(t.elapsed());
+    if report.dropped() > 0 {
+        eprintln!("[raypack] warning: {report}");
+    }
+    let quality = format!("{:?}", opts.quality).to_lowercase();
+    let build = BuildFigures::from_times(
+        "raypack",
+        format!("bvh8 {quality} {}", scene.triangle_test().name()),
+        &build_times,
+        raypack_accel_bytes(&scene) as u64,
+    );
+    Ok((scene, build))
+}
+
 /// `raypack bench`: checks the settings and the memory, builds the scene, runs [`run_bench`] and
 /// prints or writes the report.
 pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
@@ -801,48 +872,19 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     check_memory(width, height, (width * height) as u64 * per_ray, per_ray)?;
     let (builder, warnings) = load(scene_path, a.max_primitives)?;
     print_warnings(&warnings);
-    let quality: BuildQuality = a.quality.into();
-    // The binary BVH stays for the reference rows and the checksums they anchor.
-    let opts = BuildOptions { quality, watertight: a.watertight, keep_bvh2: true, ..BuildOptions::default() };
-    // The builds beyond the one kept (not with a BVH cache, whose second "build" is a load).
-    let extra_builds = if a.bvh_cache.is_some() { 0 } else { a.build_runs - 1 };
-    let mut build_times = Vec::with_capacity(a.build_runs);
-    for _ in 0..extra_builds {
-        let b = builder.clone();
-        let t = Instant::now();
-        let built = b.commit(&opts);
-        build_times.push(t.elapsed());
-        // Freed outside the timed region, as Embree's scenes are (their build time is
-        // `rtcCommitScene` alone): unmapping a large scene's arrays took tens of milliseconds.
-        drop(built);
+    let mut trees = Vec::new();
+    for (k, &q) in a.qualities().iter().enumerate() {
+        let quality: BuildQuality = q.into();
+        // The first tree's binary BVH stays for the reference rows and the checksums they
+        // anchor.
+        let opts = BuildOptions { quality, watertight: a.watertight, keep_bvh2: k == 0, ..BuildOptions::default() };
+        let (scene, build) = build_timed(&builder, &opts, &a)?;
+        let name = format!("{quality:?}").to_lowercase();
+        trees.push(RaypackTree { quality: name, scene, build });
     }
-    let t = Instant::now();
-    let (mut scene, report) = match a.bvh_cache.as_deref() {
-        None => builder.commit(&opts),
-        Some(dir) => {
-            let (scene, report, cache) = builder.commit_cached(&opts, dir);
-            for w in cache.warnings() {
-                eprintln!("[raypack] warning: {w}");
-            }
-            if cache.loaded {
-                eprintln!("[raypack] BVH loaded from {} (the build time below is the load time)", cache.path.display());
-            }
-            (scene, report)
-        }
-    };
-    build_times.push(t.elapsed());
-    if report.dropped() > 0 {
-        eprintln!("[raypack] warning: {report}");
-    }
-    let build = BuildFigures::from_times(
-        "raypack",
-        format!("bvh8 {} {}", format!("{quality:?}").to_lowercase(), scene.triangle_test().name()),
-        &build_times,
-        raypack_accel_bytes(&scene) as u64,
-    );
-    settings.ray_sets = crate::rays::ray_sets(&a, &scene, &settings)?;
+    settings.ray_sets = crate::rays::ray_sets(&a, &trees[0].scene, &settings)?;
     let name = scene_path.map_or(crate::BUILT_IN_SCENE.to_string(), |p| p.display().to_string());
-    let out = run_bench(&name, &mut scene, build, &settings, &mut |line| eprintln!("[raypack] {line}"))?;
+    let out = run_bench(&name, &mut trees, &settings, &mut |line| eprintln!("[raypack] {line}"))?;
     match a.json.as_deref() {
         Some(p) if p == Path::new("-") => println!("{:#}", out.json()),
         Some(p) => {
@@ -877,8 +919,9 @@ mod tests {
         let (scene, _) = b.commit(&BuildOptions::default());
         let build = BuildFigures::from_times("raypack", "medium".into(), &[Duration::ZERO], 0);
         let settings = BenchSettings { width: 32, height: 24, runs: 1, threads: vec![1, 2], ..Default::default() };
-        let mut scene = scene;
-        let report = run_bench("sphere", &mut scene, build, &settings, &mut |_| {}).unwrap();
+        let mut trees = [RaypackTree { quality: "medium".into(), scene, build }];
+        let report = run_bench("sphere", &mut trees, &settings, &mut |_| {}).unwrap();
+        let scene = &trees[0].scene;
         // 3 sets x 2 thread counts x the kernels of the matching query.
         let per_query = |occ: bool| KERNELS.iter().filter(move |k| k.is_occlusion() == occ);
         assert_eq!(report.rows.len(), 2 * (2 * per_query(false).count() + per_query(true).count()));
@@ -891,6 +934,37 @@ mod tests {
         assert_eq!(json["results"].as_array().unwrap().len(), report.rows.len());
         assert!(json["results"][0]["mrays_per_s"].as_f64().unwrap() > 0.0);
         assert!(report.table().contains("bvh2 reference intersect1"));
+    }
+
+    #[test]
+    fn several_trees_are_timed_under_their_quality_with_one_reference() {
+        let s = uv_sphere(16, 24);
+        let mut trees = Vec::new();
+        for (name, quality) in [("medium", BuildQuality::Medium), ("high", BuildQuality::High)] {
+            let mut b = SceneBuilder::new();
+            let m = b.add_material(Material::default());
+            b.add_mesh(&s.positions, &s.indices, m).unwrap();
+            let opts = BuildOptions { quality, keep_bvh2: name == "medium", ..BuildOptions::default() };
+            let (scene, _) = b.commit(&opts);
+            let build = BuildFigures::from_times("raypack", format!("bvh8 {name}"), &[Duration::ZERO], 0);
+            trees.push(RaypackTree { quality: name.into(), scene, build });
+        }
+        let settings = BenchSettings { width: 32, height: 24, runs: 1, threads: vec![1], ..Default::default() };
+        let report = run_bench("sphere", &mut trees, &settings, &mut |_| {}).unwrap();
+        let simd = KERNELS.iter().filter(|k| k.simd).count();
+        let per_set = |occ: bool| KERNELS.iter().filter(|k| k.is_occlusion() == occ).count();
+        let simd_per_set = |occ: bool| KERNELS.iter().filter(|k| k.simd && k.is_occlusion() == occ).count();
+        // The reference once, each SIMD kernel once per tree: 2 closest-hit sets, 1 occlusion.
+        assert!(simd > 0);
+        assert_eq!(report.rows.len(), 2 * (per_set(false) + simd_per_set(false)) + per_set(true) + simd_per_set(true));
+        assert!(report.rows.iter().all(|r| !r.checksum_differs));
+        for q in ["medium", "high"] {
+            let tag = format!(" ({q})");
+            assert!(report.rows.iter().any(|r| r.method == format!("Scene::intersect1{tag}")), "{q}");
+        }
+        assert_eq!(report.rows.iter().filter(|r| r.method.contains("reference") && r.rays == "primary").count(), 1);
+        assert_eq!(report.build.len(), 2);
+        assert!(report.build_line().unwrap().contains("raypack bvh8 high"));
     }
 
     fn row(rays: &'static str, threads: usize, tracer: &'static str, method: &str, mrays: [f64; 3]) -> BenchRow {
@@ -910,10 +984,11 @@ mod tests {
 
     #[test]
     fn summary_pairs_the_fastest_of_each_tracer_and_spans_the_runs() {
-        let (mut scene, _) = SceneBuilder::new().commit(&BuildOptions::default());
+        let (scene, _) = SceneBuilder::new().commit(&BuildOptions::default());
         let build = BuildFigures::from_times("raypack", "medium".into(), &[Duration::ZERO], 0);
         let settings = BenchSettings { width: 4, height: 4, runs: 1, threads: vec![1], ..Default::default() };
-        let mut report = run_bench("empty", &mut scene, build, &settings, &mut |_| {}).unwrap();
+        let mut trees = [RaypackTree { quality: "medium".into(), scene, build }];
+        let mut report = run_bench("empty", &mut trees, &settings, &mut |_| {}).unwrap();
         let mut wrong = row("primary", 1, "raypack", "wrong", [90.0, 100.0, 110.0]);
         wrong.checksum_differs = true;
         report.rows = vec![
@@ -991,10 +1066,11 @@ mod tests {
     #[cfg(not(feature = "embree"))]
     #[test]
     fn against_embree_without_the_feature_is_a_clear_error() {
-        let (mut scene, _) = SceneBuilder::new().commit(&BuildOptions::default());
+        let (scene, _) = SceneBuilder::new().commit(&BuildOptions::default());
         let build = BuildFigures::from_times("raypack", "medium".into(), &[Duration::ZERO], 0);
         let settings = BenchSettings { against_embree: true, ..Default::default() };
-        let err = run_bench("empty", &mut scene, build, &settings, &mut |_| {}).unwrap_err();
+        let mut trees = [RaypackTree { quality: "medium".into(), scene, build }];
+        let err = run_bench("empty", &mut trees, &settings, &mut |_| {}).unwrap_err();
         assert!(matches!(err, BenchError::EmbreeNotBuilt));
         assert!(err.to_string().contains("--features embree"));
     }

@@ -102,9 +102,11 @@ struct BenchArgs {
     /// `stream,rtcIntersect8`).
     #[arg(long, value_delimiter = ',')]
     methods: Vec<String>,
-    /// raypack's BVH build effort.
-    #[arg(long, value_enum, default_value_t = QualityArg::Medium)]
-    quality: QualityArg,
+    /// raypack's BVH build efforts, comma-separated (e.g. `medium,high`): each tree's methods
+    /// are timed, named with their quality in brackets when there are several. Default:
+    /// medium; with `--against embree`, medium and high, as Embree's MEDIUM and HIGH.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    quality: Vec<QualityArg>,
     /// Load the BVH from (or save it to) a cache file in this directory.
     #[arg(long, value_name = "DIR")]
     bvh_cache: Option<PathBuf>,
@@ -285,7 +287,7 @@ impl From<RayOrderArg> for raypack::render::RayOrder {
     }
 }
 
-#[derive(Clone, Copy, Debug, ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 enum QualityArg {
     Fast,
     Medium,
@@ -351,6 +353,26 @@ impl BenchArgs {
     /// SCENE or `--scene`; `None`: the built-in Cornell box.
     fn scene_path(&self) -> Option<&Path> {
         self.scene.as_deref().or(self.scene_flag.as_deref())
+    }
+
+    /// The qualities of `--quality`, repeats dropped; by default medium, and high as well
+    /// against Embree, whose MEDIUM and HIGH trees are both timed.
+    fn qualities(&self) -> Vec<QualityArg> {
+        let mut q = self.quality.clone();
+        if q.is_empty() {
+            q.push(QualityArg::Medium);
+            if self.against.is_some() {
+                q.push(QualityArg::High);
+            }
+        }
+        let mut seen = Vec::new();
+        q.retain(|x| {
+            !seen.contains(x) && {
+                seen.push(*x);
+                true
+            }
+        });
+        q
     }
 }
 
