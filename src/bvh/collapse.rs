@@ -126,6 +126,8 @@ struct Planned<'a> {
     bvh2: &'a Bvh2,
     first_sphere: u32,
     plans: Vec<AtomicU64>,
+    /// True when the tree holds spheres (otherwise every leaf holds triangles).
+    spheres: bool,
 }
 
 impl Planned<'_> {
@@ -383,18 +385,22 @@ impl<'a, S: Fn(u32) -> PrimShape + Sync> Emitter<'a, S> {
     /// (ties in slot order). Entry `slot` is `Some((block, first lane))`, blocks numbered
     /// from 0 for this node; the second value is the number of shared blocks.
     fn pack_leaves(&self, kids: &[usize], m: usize) -> ([Option<(u8, u8)>; 8], usize) {
-        let mut small: Kids = Kids::default();
+        let (mut small, mut size) = (Kids::default(), [0usize; 8]);
         for (slot, &c) in kids.iter().enumerate() {
-            let n = self.p.count(c) as usize;
-            if self.is_leaf_root(c) && n <= m && self.p.bvh2.prim_ids[self.p.first_prim(c)] < self.p.first_sphere {
+            if !self.is_leaf_root(c) {
+                continue;
+            }
+            size[slot] = self.p.count(c) as usize;
+            let triangles = !self.p.spheres || self.p.bvh2.prim_ids[self.p.first_prim(c)] < self.p.first_sphere;
+            if size[slot] <= m && triangles {
                 small.push(slot);
             }
         }
         let order = &mut small.n[..small.len];
-        order.sort_by_key(|&slot| std::cmp::Reverse(self.p.count(kids[slot])));
+        order.sort_by_key(|&slot| std::cmp::Reverse(size[slot]));
         let (mut place, mut fill, mut blocks) = ([None; 8], [0usize; 8], 0);
         for &slot in order.iter() {
-            let n = self.p.count(kids[slot]) as usize;
+            let n = size[slot];
             let b = (0..blocks).find(|&b| fill[b] + n <= m).unwrap_or_else(|| {
                 blocks += 1;
                 blocks - 1
@@ -621,12 +627,12 @@ pub fn collapse_for<T: TriBlock>(
     // of the cost.
     let mut plans = crate::memory::huge_page_vec(m);
     (0..m).into_par_iter().map(|_| AtomicU64::new(0)).collect_into_vec(&mut plans);
-    let p = Planned { bvh2: &bvh2, first_sphere, plans };
+    let mut p = Planned { bvh2: &bvh2, first_sphere, plans, spheres: true };
     let mut out = Arrays { nodes: vec![Bvh8Node::EMPTY], tris: Vec::new(), spheres: Vec::new() };
     if bvh2.is_empty() {
         return out.into_bvh8(test);
     }
-    plan_rec(&p, opts, T::M as u32, 0, 0);
+    p.spheres = plan_rec(&p, opts, T::M as u32, 0, 0).2 > 0;
     let cut = (p.count(0) / PARALLEL_EMIT_DIVISOR).max(1);
     let mut em = Emitter { p: &p, method: opts.method, shape: &shape, test, defer: Some((cut, Vec::new())) };
     if bvh2.nodes[0].is_leaf() || em.is_leaf_root(0) {
