@@ -445,7 +445,7 @@ pub fn cache_path(builder: &SceneBuilder, opts: &BuildOptions, dir: &Path) -> Pa
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bvh::node::NodeRef;
+    use crate::bvh::node::{LeafKind, NodeRef};
 
     /// A file whose checksum and key are right but whose trees are not what a build makes
     /// (only a forged file) is still rejected before a query could index out of range.
@@ -484,6 +484,20 @@ mod tests {
         forge("5", &|s| s.bvh8.tris[0].prim[0] = 1 << 20);
         forge("6", &|s| s.bvh2.as_mut().unwrap().nodes[0].start = 1 << 30);
         forge("7", &|s| s.bvh2.as_mut().unwrap().prim_ids[0] = 1 << 20);
+        forge("8", &|s| {
+            // A leaf whose lanes run past its block's eight: the packet kernels would index them.
+            let (i, k) = (0..s.bvh8.nodes.len())
+                .find_map(|i| {
+                    let n = &s.bvh8.nodes[i];
+                    n.children
+                        .iter()
+                        .position(|c| c.is_leaf() && !c.is_empty() && c.kind() == LeafKind::Triangles)
+                        .map(|k| (i, k))
+                })
+                .expect("a triangle leaf");
+            let c = s.bvh8.nodes[i].children[k];
+            s.bvh8.nodes[i].children[k] = NodeRef::leaf_in_block(LeafKind::Triangles, c.first_block() as u32, 7, 2);
+        });
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
