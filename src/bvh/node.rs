@@ -39,7 +39,7 @@ pub enum LeafKind {
 ///   its first block, bits 48..53 the number of lanes it uses in its last block, bits 32..48
 ///   the number of blocks (at least 1), bits 0..32 the index of the first block. A leaf of
 ///   one block uses lanes `first_lane .. first_lane + last lanes` of it, so that the small
-///   leaves of a node can share a block (see [`crate::bvh::collapse`]); a leaf of several
+///   leaves of a node can share a block (see [`mod@crate::bvh::collapse`]); a leaf of several
 ///   blocks starts at lane 0 and fills all blocks but its last;
 /// * empty: all bits set ([`NodeRef::EMPTY`]); never dereferenced because the slot's box can
 ///   never be hit.
