@@ -50,13 +50,15 @@ impl Run<'_> {
 
 /// The kernels of [`crate::kernels::KERNELS`] bound to `scene` (on its ISA).
 pub fn raypack_methods(scene: &Scene) -> Vec<Method<'_>> {
-    raypack_methods_named(scene, "")
+    raypack_methods_named(scene, "", true)
 }
 
-/// [`raypack_methods`] with `suffix` (e.g. ` (high)`) appended to every name.
-pub fn raypack_methods_named<'a>(scene: &'a Scene, suffix: &str) -> Vec<Method<'a>> {
+/// [`raypack_methods`] with `suffix` (e.g. ` (high)`) appended to every name; without
+/// `reference`, the SIMD kernels only (the scalar reference is the same whatever the BVH8).
+pub fn raypack_methods_named<'a>(scene: &'a Scene, suffix: &str, reference: bool) -> Vec<Method<'a>> {
     KERNELS
         .iter()
+        .filter(|k| reference || k.simd)
         .map(|k| Method {
             tracer: "raypack",
             name: format!("{}{suffix}", k.name),

@@ -369,9 +369,7 @@ pub fn run_bench(
     for (k, t) in trees.iter().enumerate() {
         let suffix = if trees.len() > 1 { format!(" ({})", t.quality) } else { String::new() };
         // The scalar reference (the binary BVH) is the same whatever the tree: the first's.
-        methods.extend(
-            raypack_methods_named(&t.scene, &suffix).into_iter().filter(|m| k == 0 || !m.name.contains("reference")),
-        );
+        methods.extend(raypack_methods_named(&t.scene, &suffix, k == 0));
     }
     #[cfg(feature = "embree")]
     for e in &embree_scenes {

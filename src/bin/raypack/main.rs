@@ -365,14 +365,13 @@ impl BenchArgs {
                 q.push(QualityArg::High);
             }
         }
-        let mut seen = Vec::new();
-        q.retain(|x| {
-            !seen.contains(x) && {
-                seen.push(*x);
-                true
+        let mut out = Vec::with_capacity(q.len());
+        for x in q {
+            if !out.contains(&x) {
+                out.push(x);
             }
-        });
-        q
+        }
+        out
     }
 }
 
