@@ -195,19 +195,21 @@ impl<T: TriBlock> Bvh8<T> {
     /// padding lanes excluded.
     pub fn leaf_prims(&self, r: NodeRef) -> Vec<u32> {
         let range = r.blocks();
-        let ids: Vec<u32> = match r.kind() {
+        let real = |p: &u32| *p != u32::MAX;
+        match r.kind() {
             LeafKind::Triangles => self.tris[range]
                 .iter()
                 .enumerate()
                 .flat_map(|(k, b)| crate::simd::bits(r.lane_mask(k, T::M)).map(|l| b.prim(l)))
+                .filter(real)
                 .collect(),
             LeafKind::Spheres => self.spheres[range]
                 .iter()
                 .enumerate()
                 .flat_map(|(k, b)| crate::simd::bits(r.lane_mask(k, Sphere4::M)).map(|l| b.prim[l]))
+                .filter(real)
                 .collect(),
-        };
-        ids.into_iter().filter(|&p| p != u32::MAX).collect()
+        }
     }
 }
 

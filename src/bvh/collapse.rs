@@ -219,6 +219,15 @@ fn plan_rec(p: &Planned, opts: &CollapseOptions, block_m: u32, n: usize, depth: 
     (cost, ntri, nsph)
 }
 
+/// Where [`Emitter::pack_leaves`] put a leaf: lanes `lane .. lane + lanes` of shared block
+/// `block` (numbered from 0 for the node).
+#[derive(Clone, Copy)]
+struct Placed {
+    block: usize,
+    lane: usize,
+    lanes: usize,
+}
+
 /// Up to eight binary nodes: the children of one BVH8 node.
 #[derive(Default)]
 struct Kids {
@@ -383,9 +392,9 @@ impl<'a, S: Fn(u32) -> PrimShape + Sync> Emitter<'a, S> {
 
     /// The triangle leaf roots among `kids` that share blocks: those of at most `m`
     /// triangles, placed first fit in decreasing order of size into blocks of `m` lanes
-    /// (ties in slot order). Entry `slot` is `Some((block, first lane))`, blocks numbered
-    /// from 0 for this node; the second value is the number of shared blocks.
-    fn pack_leaves(&self, kids: &[usize], m: usize) -> ([Option<(u8, u8)>; 8], usize) {
+    /// (ties in slot order). Entry `slot` says where its leaf went, blocks numbered from 0 for
+    /// this node; the second value is the number of shared blocks.
+    fn pack_leaves(&self, kids: &[usize], m: usize) -> ([Option<Placed>; 8], usize) {
         let (mut small, mut size) = (Kids::default(), [0usize; 8]);
         for (slot, &c) in kids.iter().enumerate() {
             if !self.is_leaf_root(c) {
@@ -406,7 +415,7 @@ impl<'a, S: Fn(u32) -> PrimShape + Sync> Emitter<'a, S> {
                 blocks += 1;
                 blocks - 1
             });
-            place[slot] = Some((b as u8, fill[b] as u8));
+            place[slot] = Some(Placed { block: b, lane: fill[b], lanes: n });
             fill[b] += n;
         }
         (place, blocks)
@@ -418,45 +427,44 @@ impl<'a, S: Fn(u32) -> PrimShape + Sync> Emitter<'a, S> {
         let (place, blocks) = self.pack_leaves(kids, T::M);
         let mut refs = [None; 8];
         for b in 0..blocks {
+            let in_block =
+                || (0..kids.len()).filter_map(|slot| place[slot].filter(|p| p.block == b).map(|p| (slot, p)));
             let mut block = T::EMPTY;
-            for (slot, &c) in kids.iter().enumerate() {
-                if let Some((pb, lane)) = place[slot]
-                    && pb as usize == b
-                {
-                    let start = self.p.first_prim(c);
-                    for (k, &id) in self.p.bvh2.prim_ids[start..start + self.p.count(c) as usize].iter().enumerate() {
-                        let PrimShape::Triangle([v0, v1, v2]) = (self.shape)(id) else { unreachable!("triangle leaf") };
-                        block.set_for(self.test, lane as usize + k, v0, v1, v2, id);
-                    }
-                }
+            for (slot, p) in in_block() {
+                self.set_triangles(&mut block, p.lane, self.leaf_ids(kids[slot]));
             }
             let at = out.push_tri(block) as u32;
-            for (slot, &c) in kids.iter().enumerate() {
-                if let Some((pb, lane)) = place[slot]
-                    && pb as usize == b
-                {
-                    let lanes = self.p.count(c) as usize;
-                    refs[slot] = Some(NodeRef::leaf_in_block(LeafKind::Triangles, at, lane as usize, lanes));
-                }
+            for (slot, p) in in_block() {
+                refs[slot] = Some(NodeRef::leaf_in_block(LeafKind::Triangles, at, p.lane, p.lanes));
             }
         }
         refs
     }
 
+    /// The primitive ids below leaf root `c`.
+    fn leaf_ids(&self, c: usize) -> &[u32] {
+        let start = self.p.first_prim(c);
+        &self.p.bvh2.prim_ids[start..start + self.p.count(c) as usize]
+    }
+
+    /// Stores the triangles `ids` in `block` from lane `first_lane` on.
+    fn set_triangles<T: TriBlock>(&self, block: &mut T, first_lane: usize, ids: &[u32]) {
+        for (k, &id) in ids.iter().enumerate() {
+            let PrimShape::Triangle([v0, v1, v2]) = (self.shape)(id) else { unreachable!("triangle leaf") };
+            block.set_for(self.test, first_lane + k, v0, v1, v2, id);
+        }
+    }
+
     /// Writes the leaf blocks of leaf root `c`.
     fn leaf<T: TriBlock>(&self, c: usize, out: &mut impl Sink<T>) -> NodeRef {
-        let start = self.p.first_prim(c);
-        let ids = &self.p.bvh2.prim_ids[start..start + self.p.count(c) as usize];
+        let ids = self.leaf_ids(c);
         let (kind, m) =
             if ids[0] < self.p.first_sphere { (LeafKind::Triangles, T::M) } else { (LeafKind::Spheres, Sphere4::M) };
         let mut first = 0;
         for (k, chunk) in ids.chunks(m).enumerate() {
             let at = if kind == LeafKind::Triangles {
                 let mut b = T::EMPTY;
-                for (lane, &id) in chunk.iter().enumerate() {
-                    let PrimShape::Triangle([v0, v1, v2]) = (self.shape)(id) else { unreachable!("triangle leaf") };
-                    b.set_for(self.test, lane, v0, v1, v2, id);
-                }
+                self.set_triangles(&mut b, 0, chunk);
                 out.push_tri(b)
             } else {
                 let mut b = Sphere4::EMPTY;

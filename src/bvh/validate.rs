@@ -188,11 +188,10 @@ pub fn validate_bvh8<T: TriBlock>(bvh: &Bvh8<T>, prim_bounds: &[Aabb]) -> Result
     }
     let used_tri = |b: &T| (0..T::M).filter(|&l| b.prim(l) != u32::MAX).fold(0u32, |m, l| m | 1 << l);
     let used_sphere = |b: &Sphere4| (0..Sphere4::M).filter(|&l| b.prim[l] != u32::MAX).fold(0u32, |m, l| m | 1 << l);
-    let unclaimed = |used: u32, claims: u32| used & !claims;
-    if let Some(k) = (0..bvh.tris.len()).find(|&k| unclaimed(used_tri(&bvh.tris[k]), claimed.0[k]) != 0) {
+    if let Some(k) = (0..bvh.tris.len()).find(|&k| used_tri(&bvh.tris[k]) & !claimed.0[k] != 0) {
         return Err(format!("triangle block {k} has lanes no leaf holds"));
     }
-    if let Some(k) = (0..bvh.spheres.len()).find(|&k| unclaimed(used_sphere(&bvh.spheres[k]), claimed.1[k]) != 0) {
+    if let Some(k) = (0..bvh.spheres.len()).find(|&k| used_sphere(&bvh.spheres[k]) & !claimed.1[k] != 0) {
         return Err(format!("sphere block {k} has lanes no leaf holds"));
     }
     if let Some(i) = reached.iter().position(|r| !r) {
