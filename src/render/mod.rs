@@ -227,6 +227,8 @@ fn render_tile(
     let mut owner: Vec<u32> = Vec::with_capacity(cap);
     // The image positions of the pass's samples, made into camera rays together.
     let mut positions: Vec<[f32; 2]> = Vec::with_capacity(cap);
+    // The top-left corner of each pixel of the tile, in image coordinates.
+    let corners: Vec<[f32; 2]> = (0..npix).map(|i| [(x0 + i % tw) as f32, (y0 + i / tw) as f32]).collect();
     let mut log = RayLog::default();
     let mut phases = PhaseTimes::default();
     let mut invalid = 0u64;
@@ -246,20 +248,19 @@ fn render_tile(
                 if est.done {
                     continue;
                 }
-                let (x, y) = (x0 + i % tw, y0 + i / tw);
-                for s in taken..pass_end {
-                    let mut rng = Rng::new(settings.seed, sample_stream(y * w + x, s));
-                    // One sample goes through the pixel centre; more are jittered uniformly.
-                    let (jx, jy) = if centre_only { (0.5, 0.5) } else { rng.next_2d() };
-                    positions.push([x as f32 + jx, y as f32 + jy]);
-                    wavefront.push_path(rng);
-                    owner.push(i as u32);
-                }
+                let pixel = (y0 + i / tw) * w + x0 + i % tw;
+                wavefront.push_paths((taken..pass_end).map(|s| Rng::new(settings.seed, sample_stream(pixel, s))));
+                owner.extend(std::iter::repeat_n(i as u32, (pass_end - taken) as usize));
             }
-            camera.rays_through(&positions, w, h, |ray| {
-                log.record(RayKind::Camera, &ray);
-                wavefront.push_camera_ray(ray);
-            });
+            // One sample goes through the pixel centre; more are jittered uniformly, by the
+            // first numbers of their paths' generators.
+            positions.extend(wavefront.path_rngs().zip(&owner).map(|(rng, &i)| {
+                let (jx, jy) = if centre_only { (0.5, 0.5) } else { rng.next_2d() };
+                let [x, y] = corners[i as usize];
+                [x + jx, y + jy]
+            }));
+            wavefront.set_camera_rays(|rays| camera.rays_into(&positions, w, h, rays));
+            log.record(RayKind::Camera, wavefront.camera_rays());
             phases.generate += t0.elapsed();
             wavefront.run(integrator, order, &mut log, &mut phases);
             let t1 = Instant::now();

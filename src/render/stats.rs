@@ -97,21 +97,26 @@ impl RayLog {
         }
     }
 
-    /// Counts one ray of `kind` (and keeps it if it falls on the sampling grid).
+    /// Counts the rays of `rays` as rays of `kind`, keeping those that fall on the sampling
+    /// grid (one ray in `SAMPLE_EVERY` of the kind, the first one included, at most
+    /// `SAMPLES_PER_TILE` per log).
     #[inline]
-    pub fn record(&mut self, kind: RayKind, ray: &Ray) {
+    pub fn record(&mut self, kind: RayKind, rays: &[Ray]) {
         let c = match kind {
             RayKind::Camera => &mut self.counts.camera,
             RayKind::Shadow => &mut self.counts.shadow,
             RayKind::Bounce => &mut self.counts.bounce,
         };
         let n = *c;
-        *c += 1;
-        if n % SAMPLE_EVERY == 0 {
-            let s = &mut self.sampled[kind as usize];
-            if s.len() < SAMPLES_PER_TILE {
-                s.push(*ray);
+        *c += rays.len() as u64;
+        // The rays whose count `n + k` falls on the sampling grid.
+        let first = ((SAMPLE_EVERY - n % SAMPLE_EVERY) % SAMPLE_EVERY) as usize;
+        let s = &mut self.sampled[kind as usize];
+        for ray in rays.iter().skip(first).step_by(SAMPLE_EVERY as usize) {
+            if s.len() >= SAMPLES_PER_TILE {
+                break;
             }
+            s.push(*ray);
         }
     }
 
@@ -190,5 +195,23 @@ mod tests {
         assert_eq!(tests_per_ray(&scene, &down, RayKind::Bounce, false), Some(closest));
         assert_eq!(tests_per_ray(&scene, &down, RayKind::Camera, true), Some(2048.0));
         assert_eq!(tests_per_ray(&scene, &[], RayKind::Camera, false), None);
+    }
+
+    #[test]
+    fn the_log_keeps_every_997th_ray_whatever_the_runs_it_is_given_in() {
+        let ray = |i: usize| Ray::new(Vec3::new(i as f32, 0.0, 0.0), Vec3::Z);
+        let rays: Vec<Ray> = (0..20_000).map(ray).collect();
+        for runs in [vec![20_000], vec![1; 3000], vec![996, 1, 1, 997, 5000, 3], vec![0, 997, 998, 1994, 7]] {
+            let mut log = RayLog::default();
+            let mut at = 0;
+            for n in runs {
+                log.record(RayKind::Shadow, &rays[at..at + n]);
+                at += n;
+            }
+            assert_eq!(log.counts.shadow, at as u64);
+            assert_eq!(log.counts.camera + log.counts.bounce, 0);
+            let expect: Vec<Ray> = (0..at).step_by(997).take(SAMPLES_PER_TILE).map(ray).collect();
+            assert_eq!(log.sampled[RayKind::Shadow as usize], expect);
+        }
     }
 }

@@ -2,8 +2,8 @@
 //! ray of a bounce is traced in one stream through the packet kernels.
 //!
 //! A batch (the camera samples of one pass over a tile) goes through:
-//! 1. *generate*: the caller queues one path and its camera ray per sample
-//!    ([`Wavefront::push_path`], [`Wavefront::push_camera_ray`]);
+//! 1. *generate*: the caller queues one path per sample and then their camera rays
+//!    ([`Wavefront::push_paths`], [`Wavefront::set_camera_rays`]);
 //! 2. *trace*: the camera rays as one closest-hit stream; the paths whose ray left the scene
 //!    end there, and the others go on in waves of 1024 paths;
 //! 3. *shade*: each hit adds its emission, queues its direct-lighting samples (shadow rays, or
@@ -127,19 +127,36 @@ impl Wavefront {
         self.paths.is_empty()
     }
 
-    /// Adds a path drawing from `rng`; its camera ray follows with
-    /// [`Wavefront::push_camera_ray`] (the paths' rays in the order of the paths).
+    /// Adds a path drawing from each generator of `rngs`; their camera rays follow with
+    /// [`Wavefront::set_camera_rays`].
     #[inline]
-    pub fn push_path(&mut self, rng: Rng) {
-        self.paths.push(PathState::new(rng));
+    pub fn push_paths(&mut self, rngs: impl Iterator<Item = Rng>) {
+        self.paths.extend(rngs.map(PathState::new));
     }
 
-    /// Sets the camera ray of the next path that has none yet.
+    /// The random number generators of the batch's paths, in the order of the paths (a
+    /// camera sample's own numbers, such as its position in the pixel, are drawn from them).
+    pub fn path_rngs(&mut self) -> impl Iterator<Item = &mut Rng> {
+        self.paths.iter_mut().map(|p| &mut p.rng)
+    }
+
+    /// Sets the camera rays of the batch: `write` appends to the empty vector it is given one
+    /// ray per path, in the order of the paths.
+    ///
+    /// # Panics
+    /// When `write` leaves a number of rays other than the number of paths.
     #[inline]
-    pub fn push_camera_ray(&mut self, ray: Ray) {
-        let id = self.camera.rays.len() as u32;
-        debug_assert!((id as usize) < self.paths.len(), "a camera ray for a path not pushed");
-        self.camera.push(ray, id);
+    pub fn set_camera_rays(&mut self, write: impl FnOnce(&mut Vec<Ray>)) {
+        let c = &mut self.camera;
+        c.clear();
+        write(&mut c.rays);
+        assert_eq!(c.rays.len(), self.paths.len(), "one camera ray per path");
+        c.owner.extend(0..c.rays.len() as u32);
+    }
+
+    /// The camera rays of the batch.
+    pub fn camera_rays(&self) -> &[Ray] {
+        &self.camera.rays
     }
 
     /// The radiance each path of the batch brought back, in the order they were pushed.
@@ -255,7 +272,7 @@ impl Wavefront {
             if q.is_empty() {
                 return;
             }
-            log_rays(log, RayKind::Bounce, &q.rays);
+            log.record(RayKind::Bounce, &q.rays);
             clock.lap(&mut times.compact);
             q.sort(order.bounce, bounds, &mut self.scratch);
             clock.lap(&mut times.sort);
@@ -288,7 +305,7 @@ impl DirectContext<'_, '_> {
         let (integrator, order, bounds, tracer) = (self.integrator, self.order, self.bounds, self.integrator.tracer());
         let s = &mut d.shadow;
         if !s.is_empty() {
-            log_rays(log, RayKind::Shadow, &s.rays);
+            log.record(RayKind::Shadow, &s.rays);
             clock.lap(&mut times.shade);
             s.sort(order.shadow, bounds, scratch);
             clock.lap(&mut times.sort);
@@ -301,7 +318,7 @@ impl DirectContext<'_, '_> {
         }
         let p = &mut d.probes;
         if !p.is_empty() {
-            log_rays(log, RayKind::Bounce, &p.rays);
+            log.record(RayKind::Bounce, &p.rays);
             clock.lap(&mut times.shade);
             p.sort(order.bounce, bounds, scratch);
             clock.lap(&mut times.sort);
@@ -419,12 +436,6 @@ impl Clock {
         let now = Instant::now();
         *phase += now - self.0;
         self.0 = now;
-    }
-}
-
-fn log_rays(log: &mut RayLog, kind: RayKind, rays: &[Ray]) {
-    for r in rays {
-        log.record(kind, r);
     }
 }
 

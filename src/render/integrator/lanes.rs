@@ -551,11 +551,13 @@ mod tests {
                 let mut wf = Wavefront::new();
                 wf.reserve(3000, &integrator);
                 let mut dirs = Rng::new(case as u64, 1);
-                for i in 0..3000 {
-                    wf.push_path(Rng::new(7, i));
-                    let d = Vec3::new(dirs.next_f32() - 0.5, dirs.next_f32() - 0.5, dirs.next_f32() - 0.5);
-                    wf.push_camera_ray(Ray::new(centre, d));
-                }
+                wf.push_paths((0..3000).map(|i| Rng::new(7, i)));
+                wf.set_camera_rays(|rays| {
+                    rays.extend((0..3000).map(|_| {
+                        let d = Vec3::new(dirs.next_f32() - 0.5, dirs.next_f32() - 0.5, dirs.next_f32() - 0.5);
+                        Ray::new(centre, d)
+                    }))
+                });
                 let (mut log, mut times) = (RayLog::default(), PhaseTimes::default());
                 wf.run(&integrator, StreamOrder::default(), &mut log, &mut times);
                 wf.radiance().map(|l| l.to_array().map(f32::to_bits)).collect::<Vec<_>>()
