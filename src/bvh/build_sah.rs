@@ -722,6 +722,12 @@ fn median_split(prims: &mut [BuildPrim], cb: &Box4) -> (usize, PrimInfo, PrimInf
             a.centroid2()[axis].total_cmp(&b.centroid2()[axis]).then(a.id().cmp(&b.id()))
         });
     }
+    with_infos(prims, mid)
+}
+
+/// `mid` with the [`PrimInfo`] of `prims[..mid]` and of `prims[mid..]`.
+#[inline]
+fn with_infos(prims: &[BuildPrim], mid: usize) -> (usize, PrimInfo, PrimInfo) {
     let (l, r) = prims.split_at(mid);
     (mid, PrimInfo::of(l), PrimInfo::of(r))
 }
@@ -735,11 +741,11 @@ fn median_split(prims: &mut [BuildPrim], cb: &Box4) -> (usize, PrimInfo, PrimInf
 // --build-runs 7`, three interleaved rounds, medians) 0.334 / 0.338 / 0.318 s -> 0.302 /
 // 0.306 / 0.298 s, AMD EPYC Zen 4. Gathering the infos in the classifying loop without
 // branches (a select per lane) was slower than either: 0.341 / 0.352 / 0.351 s. Blocks of
-// 128: the same as 64.
+// 16, 32 or 128: the same as 64.
 #[inline]
 fn partition_with_info(prims: &mut [BuildPrim], left: impl Fn(Vec4) -> bool) -> (usize, PrimInfo, PrimInfo) {
     let mid = partition_blocks(prims, |p| left(p.centroid2()));
-    (mid, PrimInfo::of(&prims[..mid]), PrimInfo::of(&prims[mid..]))
+    with_infos(prims, mid)
 }
 
 /// [`partition`] in blocks, as BlockQuicksort does (Edelkamp and Weiß, "BlockQuicksort:

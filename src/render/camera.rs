@@ -110,6 +110,7 @@ mod tests {
             let px: [f32; 4] = std::array::from_fn(|_| rng.next_f32() * w as f32);
             let py: [f32; 4] = std::array::from_fn(|_| rng.next_f32() * h as f32);
             let positions: Vec<[f32; 2]> = (0..3 + k % 3).map(|i| [px[i % 4], py[i % 4]]).collect();
+            // One ray already there: `rays_into` appends.
             let mut through = vec![Ray::new(Vec3::ZERO, Vec3::X)];
             rays.rays_into(&positions, w, h, &mut through);
             let through = &through[1..];

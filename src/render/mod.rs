@@ -260,7 +260,6 @@ fn render_tile(
                 [x + jx, y + jy]
             }));
             wavefront.set_camera_rays(|rays| camera.rays_into(&positions, w, h, rays));
-            log.record(RayKind::Camera, wavefront.camera_rays());
             phases.generate += t0.elapsed();
             wavefront.run(integrator, order, &mut log, &mut phases);
             let t1 = Instant::now();

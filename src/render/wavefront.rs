@@ -154,23 +154,19 @@ impl Wavefront {
         c.owner.extend(0..c.rays.len() as u32);
     }
 
-    /// The camera rays of the batch.
-    pub fn camera_rays(&self) -> &[Ray] {
-        &self.camera.rays
-    }
-
     /// The radiance each path of the batch brought back, in the order they were pushed.
     pub fn radiance(&self) -> impl Iterator<Item = Vec3> + '_ {
         self.paths.iter().map(|p| p.l)
     }
 
-    /// Traces the batch to the end of its last path, logging the rays in `log` and the time
-    /// of each phase in `times`.
+    /// Traces the batch to the end of its last path, logging every ray it traces (camera,
+    /// shadow, bounce) in `log` and the time of each phase in `times`.
     pub fn run(&mut self, integrator: &Integrator, order: StreamOrder, log: &mut RayLog, times: &mut PhaseTimes) {
         let tracer = integrator.tracer();
         let bounds = tracer.scene().bounds();
         let mut clock = Clock::start();
         let c = &mut self.camera;
+        log.record(RayKind::Camera, &c.rays);
         resize(&mut c.hits, c.rays.len(), Hit::MISS);
         tracer.closest_batch(&c.rays, &mut c.hits);
         clock.lap(&mut times.trace[RayKind::Camera as usize]);
