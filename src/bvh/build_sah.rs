@@ -811,13 +811,13 @@ const SMALL_NODE: usize = 32;
 /// [`partition`] without data-dependent branches: Lomuto's scheme, each element swapped
 /// with the first one of the right side whether it goes left or not (a swap with itself or
 /// with another right-side element changes nothing that matters), the boundary moved by the
-/// predicate. Two loads and two stores per element, against a mispredicted branch for every
-/// other element of a mixed run in the plain partition.
+/// predicate. One swap per element, against a mispredicted branch for every other element
+/// of a mixed run in the plain partition.
 //
 // Small nodes are most of a build's nodes: with this (and one set of bins below SMALL_NODE)
-// splitting a node of 5-8 primitives took 380 instead of 545 cycles, of 9-16 475 instead of
-// 770, of 17-64 1100 instead of 1405 (2M knot, one CPU, rdtsc around `choose_split`). Whole
-// Medium commits on one CPU: PERFORMANCE.md, "Builder time against Embree".
+// splitting a node of 5-8 primitives took 375 instead of 545 cycles, of 9-16 470 instead of
+// 770, of 17-64 910 instead of 1405, of 65-1024 4310 instead of 4900 (2M knot, one CPU,
+// rdtsc around `choose_split`). Whole commits: PERFORMANCE.md, "Builder time against Embree".
 #[inline]
 fn partition_lomuto(prims: &mut [BuildPrim], pred: impl Fn(&BuildPrim) -> bool) -> usize {
     let mut j = 0;
