@@ -118,6 +118,8 @@ impl BuildOptions {
 const MAX_BINS: usize = 256;
 /// Nodes with more primitives than this bin in parallel chunks.
 const PARALLEL_BIN_THRESHOLD: usize = 1 << 16;
+/// Nodes of fewer primitives than this bin into one set of bins, not two ([`bin_prims`]).
+const SMALL_NODE: usize = 32;
 /// Subtrees with more primitives than this are built on another rayon task (4096 was
 /// slower: dragon, 2 threads, medians of 10 runs 0.235–0.252 s against 0.214–0.227 s).
 const PARALLEL_SUBTREE_THRESHOLD: usize = 1 << 14;
@@ -804,9 +806,6 @@ fn partition_blocks(prims: &mut [BuildPrim], pred: impl Fn(&BuildPrim) -> bool) 
     // elements: finish them without branches too.
     l + partition_lomuto(&mut prims[l..r], pred)
 }
-
-/// Nodes of fewer primitives than this bin into one set of bins ([`bin_prims`]).
-const SMALL_NODE: usize = 32;
 
 /// [`partition`] without data-dependent branches: Lomuto's scheme, each element swapped
 /// with the first one of the right side whether it goes left or not (a swap with itself or
