@@ -294,10 +294,16 @@ pub fn edges_and_vertices(scene: &Scene, n: usize, seed: u64) -> Vec<Ray> {
 }
 
 /// The three sets that `raypack bench` times: primary rays at `width × height`, and the
-/// diffuse bounces and shadow rays of their hits (hits found with the reference traversal).
+/// diffuse bounces and shadow rays of their hits. The hits come from the reference traversal
+/// of the binary BVH when the scene kept it ([`crate::BuildOptions::keep_bvh2`]), else from
+/// the BVH8 kernel, which the tests hold equal to it: the reference without a binary BVH tests
+/// every primitive, hours on a million triangles.
 pub fn bench_sets(scene: &Scene, width: usize, height: usize, seed: u64) -> [RaySet; 3] {
     let primary = primary_for_scene(scene, width, height);
-    let hits: Vec<Hit> = primary.iter().map(|r| scene.intersect1_reference(r)).collect();
+    let hits: Vec<Hit> = match scene.bvh2() {
+        Some(_) => primary.iter().map(|r| scene.intersect1_reference(r)).collect(),
+        None => primary.iter().map(|r| scene.intersect1(r)).collect(),
+    };
     let diffuse = diffuse_bounces(scene, &primary, &hits, seed);
     let shadow = shadow_rays(scene, &primary, &hits, light_above(&scene.bounds()));
     [
@@ -362,6 +368,23 @@ mod tests {
         let shadows = shadow_rays(&scene, &rays, &hits, light);
         assert!(shadows.iter().all(|r| !scene.occluded1(r) && (r.at(r.tfar) - light).length() < 1e-3));
         assert_eq!(Checksum::of_occlusion(&shadows, &vec![false; shadows.len()]).hits, 0);
+    }
+
+    #[test]
+    fn bench_sets_are_the_same_with_or_without_the_binary_bvh() {
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::default());
+        let g = grid(8, 8);
+        b.add_mesh(&g.positions, &g.indices, m).unwrap();
+        b.add_sphere(Vec3::new(0.2, 0.1, 0.3), 0.25, m).unwrap();
+        let lean = b.clone().commit(&BuildOptions::default()).0;
+        let kept = b.commit(&BuildOptions { keep_bvh2: true, ..BuildOptions::default() }).0;
+        assert!(lean.bvh2().is_none() && kept.bvh2().is_some());
+        let (a, b) = (bench_sets(&lean, 48, 32, 5), bench_sets(&kept, 48, 32, 5));
+        assert!(a[1].rays.len() > 300, "a diffuse ray per primary hit: {}", a[1].rays.len());
+        for (a, b) in a.iter().zip(&b) {
+            assert_eq!(a.rays, b.rays, "{}", a.kind.name());
+        }
     }
 
     #[test]
