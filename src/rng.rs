@@ -22,6 +22,27 @@ fn splitmix64(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// The generators of every stream of one seed: [`RngStreams::stream`] is
+/// [`Rng::new`]`(seed, stream)` with the seed's part computed once.
+#[derive(Clone, Copy, Debug)]
+pub struct RngStreams {
+    /// `splitmix64(seed)`.
+    mixed_seed: u64,
+}
+
+impl RngStreams {
+    /// The generator of stream `stream`: the same numbers as `Rng::new(seed, stream)`.
+    #[inline]
+    pub fn stream(&self, stream: u64) -> Rng {
+        // PCG32's seeding (`state = 0`, a step, `state += seed`, a step) in closed form.
+        let inc = (splitmix64(stream ^ 0xDA3E_39CB_94B9_5BDB) << 1) | 1;
+        Rng { state: inc.wrapping_add(self.mixed_seed).wrapping_mul(PCG_MULTIPLIER).wrapping_add(inc), inc }
+    }
+}
+
+/// PCG32's LCG multiplier.
+const PCG_MULTIPLIER: u64 = 6_364_136_223_846_793_005;
+
 impl Rng {
     /// A generator for stream `stream` (e.g. a pixel index) of the render seeded `seed`.
     pub fn new(seed: u64, stream: u64) -> Self {
@@ -32,11 +53,16 @@ impl Rng {
         r
     }
 
+    /// The generators of every stream of `seed` (for many streams of one seed).
+    pub fn streams(seed: u64) -> RngStreams {
+        RngStreams { mixed_seed: splitmix64(seed) }
+    }
+
     /// The next 32 random bits.
     #[inline]
     pub fn next_u32(&mut self) -> u32 {
         let old = self.state;
-        self.state = old.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(self.inc);
+        self.state = old.wrapping_mul(PCG_MULTIPLIER).wrapping_add(self.inc);
         let xorshifted = (((old >> 18) ^ old) >> 27) as u32;
         let rot = (old >> 59) as u32;
         xorshifted.rotate_right(rot)
@@ -58,6 +84,19 @@ impl Rng {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn streams_are_the_generators_of_new() {
+        for seed in [0, 1, 7, u64::MAX, 0x1234_5678_9ABC_DEF0] {
+            let streams = Rng::streams(seed);
+            for stream in [0, 1, 2, 1 << 32 | 5, u64::MAX, 0xDA3E_39CB_94B9_5BDB] {
+                let (mut a, mut b) = (Rng::new(seed, stream), streams.stream(stream));
+                let (a, b): (Vec<u32>, Vec<u32>) =
+                    ((0..8).map(|_| a.next_u32()).collect(), (0..8).map(|_| b.next_u32()).collect());
+                assert_eq!(a, b, "seed {seed}, stream {stream}");
+            }
+        }
+    }
 
     #[test]
     fn uniform_mean_and_range() {

@@ -229,6 +229,7 @@ fn render_tile(
     let mut positions: Vec<[f32; 2]> = Vec::with_capacity(cap);
     // The top-left corner of each pixel of the tile, in image coordinates.
     let corners: Vec<[f32; 2]> = (0..npix).map(|i| [(x0 + i % tw) as f32, (y0 + i / tw) as f32]).collect();
+    let streams = Rng::streams(settings.seed);
     let mut log = RayLog::default();
     let mut phases = PhaseTimes::default();
     let mut invalid = 0u64;
@@ -249,7 +250,7 @@ fn render_tile(
                     continue;
                 }
                 let pixel = (y0 + i / tw) * w + x0 + i % tw;
-                wavefront.push_paths((taken..pass_end).map(|s| Rng::new(settings.seed, sample_stream(pixel, s))));
+                wavefront.push_paths((taken..pass_end).map(|s| streams.stream(sample_stream(pixel, s))));
                 owner.extend(std::iter::repeat_n(i as u32, (pass_end - taken) as usize));
             }
             // One sample goes through the pixel centre; more are jittered uniformly, by the
