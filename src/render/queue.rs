@@ -61,25 +61,6 @@ impl RayQueue {
         self.owner.truncate(n);
     }
 
-    /// Keeps the rays whose closest hit (`hits`, as long as the queue) is a hit, in order,
-    /// with their owners and hits, handing each ray that missed to `missed` with its owner.
-    pub fn retain_hits(&mut self, mut missed: impl FnMut(&Ray, &Hit, u32)) {
-        debug_assert_eq!(self.hits.len(), self.len());
-        let mut n = 0;
-        for k in 0..self.rays.len() {
-            let (ray, hit, owner) = (self.rays[k], self.hits[k], self.owner[k]);
-            if hit.is_hit() {
-                (self.rays[n], self.hits[n], self.owner[n]) = (ray, hit, owner);
-                n += 1;
-            } else {
-                missed(&ray, &hit, owner);
-            }
-        }
-        self.rays.truncate(n);
-        self.hits.truncate(n);
-        self.owner.truncate(n);
-    }
-
     /// Reorders the rays (with their owners) for coherent tracing; a pure function of the
     /// rays, so that the order never depends on the thread.
     pub fn sort(&mut self, order: RayOrder, bounds: &Aabb, scratch: &mut SortScratch) {

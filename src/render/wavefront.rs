@@ -53,9 +53,16 @@ impl StreamOrder {
 /// One worker's wavefront: the paths of a batch and its queues, reused from batch to batch.
 #[derive(Clone, Debug, Default)]
 pub struct Wavefront {
-    /// Paths of the batch, in camera-ray order.
+    /// The random number generators of the batch's camera samples, in sample order.
+    rngs: Vec<Rng>,
+    /// The radiance each camera sample brought back, in sample order.
+    radiance: Vec<Vec3>,
+    /// The paths of the samples whose camera ray hit something, in sample order: a sample
+    /// whose camera ray leaves the scene is done then, and never takes a path.
     paths: Vec<PathState>,
-    /// The camera rays of the batch, owned by their paths.
+    /// `sample_of[p]`: the camera sample of `paths[p]`.
+    sample_of: Vec<u32>,
+    /// The camera rays of the batch, owned by their samples (by their paths once traced).
     camera: RayQueue,
     /// The rays of the current bounce of the current wave, each owned by its path.
     queue: RayQueue,
@@ -83,7 +90,10 @@ impl Wavefront {
             v.reserve(n.saturating_sub(v.len()));
         }
         let Capacity { paths, wave, samples } = Capacity::of(paths, integrator.direct_samples_per_point() as usize);
+        room(&mut self.rngs, paths);
+        room(&mut self.radiance, paths);
         room(&mut self.paths, paths);
+        room(&mut self.sample_of, paths);
         let c = &mut self.camera;
         room(&mut c.rays, paths);
         room(&mut c.owner, paths);
@@ -113,50 +123,50 @@ impl Wavefront {
 
     /// Starts a new batch.
     pub fn clear(&mut self) {
-        self.paths.clear();
+        self.rngs.clear();
         self.camera.clear();
     }
 
-    /// Number of paths in the batch.
+    /// Number of camera samples in the batch.
     pub fn len(&self) -> usize {
-        self.paths.len()
+        self.rngs.len()
     }
 
-    /// True when the batch has no path.
+    /// True when the batch has no camera sample.
     pub fn is_empty(&self) -> bool {
-        self.paths.is_empty()
+        self.rngs.is_empty()
     }
 
-    /// Adds a path drawing from each generator of `rngs`; their camera rays follow with
-    /// [`Wavefront::set_camera_rays`].
+    /// Adds a camera sample drawing from each generator of `rngs` (its path's, if its camera
+    /// ray hits); their camera rays follow with [`Wavefront::set_camera_rays`].
     #[inline]
     pub fn push_paths(&mut self, rngs: impl Iterator<Item = Rng>) {
-        self.paths.extend(rngs.map(PathState::new));
+        self.rngs.extend(rngs);
     }
 
-    /// The random number generators of the batch's paths, in the order of the paths (a
-    /// camera sample's own numbers, such as its position in the pixel, are drawn from them).
+    /// The random number generators of the batch's camera samples, in order (a camera
+    /// sample's own numbers, such as its position in the pixel, are drawn from them first).
     pub fn path_rngs(&mut self) -> impl Iterator<Item = &mut Rng> {
-        self.paths.iter_mut().map(|p| &mut p.rng)
+        self.rngs.iter_mut()
     }
 
     /// Sets the camera rays of the batch: `write` appends to the empty vector it is given one
     /// ray per path, in the order of the paths.
     ///
     /// # Panics
-    /// When `write` leaves a number of rays other than the number of paths.
+    /// When `write` leaves a number of rays other than the number of camera samples.
     #[inline]
     pub fn set_camera_rays(&mut self, write: impl FnOnce(&mut Vec<Ray>)) {
         let c = &mut self.camera;
         c.clear();
         write(&mut c.rays);
-        assert_eq!(c.rays.len(), self.paths.len(), "one camera ray per path");
-        c.owner.extend(0..c.rays.len() as u32);
+        assert_eq!(c.rays.len(), self.rngs.len(), "one camera ray per sample");
     }
 
-    /// The radiance each path of the batch brought back, in the order they were pushed.
+    /// The radiance each camera sample of the batch brought back, in the order they were
+    /// pushed.
     pub fn radiance(&self) -> impl Iterator<Item = Vec3> + '_ {
-        self.paths.iter().map(|p| p.l)
+        self.radiance.iter().copied()
     }
 
     /// Traces the batch to the end of its last path, logging every ray it traces (camera,
@@ -170,21 +180,40 @@ impl Wavefront {
         resize(&mut c.hits, c.rays.len(), Hit::MISS);
         tracer.closest_batch(&c.rays, &mut c.hits);
         clock.lap(&mut times.trace[RayKind::Camera as usize]);
+        self.radiance.clear();
         if !integrator.traces_paths() {
-            for (k, &id) in c.owner.iter().enumerate() {
-                self.paths[id as usize].l = integrator.camera_only(&c.rays[k], &c.hits[k]);
-            }
+            let values = c.rays.iter().zip(&c.hits).map(|(ray, hit)| integrator.camera_only(ray, hit));
+            self.radiance.extend(values);
             clock.lap(&mut times.shade);
             return;
         }
-        // Camera rays that leave the scene end their paths here (a miss queues nothing), so
-        // that the waves hold only paths that go on.
-        let (paths, direct) = (&mut self.paths, &mut self.direct);
-        c.retain_hits(|ray, hit, id| {
-            let ends = integrator.shade(&mut paths[id as usize], ray, hit, &MISSED, direct, id);
-            debug_assert!(ends.is_none());
-        });
-        let n = c.len();
+        // A camera ray that leaves the scene ends its sample here (a miss queues nothing): its
+        // path is shaded on the spot and never stored, so that the waves hold only paths
+        // that go on. The others take a path each, in sample order.
+        resize(&mut self.radiance, c.rays.len(), Vec3::ZERO);
+        let (rngs, radiance, paths, sample_of, direct) =
+            (&self.rngs, &mut self.radiance, &mut self.paths, &mut self.sample_of, &mut self.direct);
+        paths.clear();
+        sample_of.clear();
+        c.owner.clear();
+        let mut n = 0;
+        for k in 0..c.rays.len() {
+            let (ray, hit) = (c.rays[k], c.hits[k]);
+            if hit.is_hit() {
+                (c.rays[n], c.hits[n]) = (ray, hit);
+                c.owner.push(n as u32);
+                paths.push(PathState::new(rngs[k].clone()));
+                sample_of.push(k as u32);
+                n += 1;
+            } else {
+                let mut path = PathState::new(rngs[k].clone());
+                let ends = integrator.shade(&mut path, &ray, &hit, &MISSED, direct, u32::MAX);
+                debug_assert!(ends.is_none());
+                radiance[k] = path.l;
+            }
+        }
+        c.rays.truncate(n);
+        c.hits.truncate(n);
         clock.lap(&mut times.shade);
         // The paths go on in waves of WAVE_PATHS, whose queues stay in the cache.
         for start in (0..n).step_by(WAVE_PATHS) {
@@ -198,6 +227,10 @@ impl Wavefront {
             clock.lap(&mut times.generate);
             self.advance(integrator, order, &bounds, log, &mut clock, times);
         }
+        for (path, &k) in self.paths.iter().zip(&self.sample_of) {
+            self.radiance[k as usize] = path.l;
+        }
+        clock.lap(&mut times.film);
     }
 
     /// Advances the paths of `queue` (rays traced, `hits` found) to their ends.
@@ -399,7 +432,8 @@ pub fn worker_bytes(paths: usize, direct: usize) -> u64 {
     use std::mem::size_of;
     let Capacity { paths, wave, samples } = Capacity::of(paths, direct);
     let ray = size_of::<Ray>() + size_of::<u32>();
-    let per_path = size_of::<PathState>() + ray + size_of::<Hit>();
+    let per_path =
+        size_of::<Rng>() + size_of::<Vec3>() + size_of::<PathState>() + size_of::<u32>() + ray + size_of::<Hit>();
     let per_wave =
         ray + size_of::<Hit>() + size_of::<bool>() + size_of::<SurfaceHit>() + size_of::<super::queue::DirectPoint>();
     let per_sample = size_of::<super::queue::DirectSample>() + ray + size_of::<bool>();
