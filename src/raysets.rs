@@ -319,12 +319,17 @@ mod tests {
     use crate::generate::grid;
     use crate::{BuildOptions, Material, SceneBuilder};
 
-    fn grid_scene() -> Scene {
+    /// An 8 × 8 grid in the plane z = 0, material 0.
+    fn grid_builder() -> SceneBuilder {
         let mut b = SceneBuilder::new();
         let m = b.add_material(Material::default());
         let g = grid(8, 8);
         b.add_mesh(&g.positions, &g.indices, m).unwrap();
-        b.commit(&BuildOptions::default()).0
+        b
+    }
+
+    fn grid_scene() -> Scene {
+        grid_builder().commit(&BuildOptions::default()).0
     }
 
     #[test]
@@ -372,11 +377,8 @@ mod tests {
 
     #[test]
     fn bench_sets_are_the_same_with_or_without_the_binary_bvh() {
-        let mut b = SceneBuilder::new();
-        let m = b.add_material(Material::default());
-        let g = grid(8, 8);
-        b.add_mesh(&g.positions, &g.indices, m).unwrap();
-        b.add_sphere(Vec3::new(0.2, 0.1, 0.3), 0.25, m).unwrap();
+        let mut b = grid_builder();
+        b.add_sphere(Vec3::new(0.2, 0.1, 0.3), 0.25, 0).unwrap();
         let lean = b.clone().commit(&BuildOptions::default()).0;
         let kept = b.commit(&BuildOptions { keep_bvh2: true, ..BuildOptions::default() }).0;
         assert!(lean.bvh2().is_none() && kept.bvh2().is_some());
