@@ -250,12 +250,12 @@ fn render_tile(
                     continue;
                 }
                 let pixel = (y0 + i / tw) * w + x0 + i % tw;
-                wavefront.push_paths((taken..pass_end).map(|s| streams.stream(sample_stream(pixel, s))));
+                wavefront.push_samples((taken..pass_end).map(|s| streams.stream(sample_stream(pixel, s))));
                 owner.extend(std::iter::repeat_n(i as u32, (pass_end - taken) as usize));
             }
             // One sample goes through the pixel centre; more are jittered uniformly, by the
             // first numbers of their paths' generators.
-            positions.extend(wavefront.path_rngs().zip(&owner).map(|(rng, &i)| {
+            positions.extend(wavefront.sample_rngs().zip(&owner).map(|(rng, &i)| {
                 let (jx, jy) = if centre_only { (0.5, 0.5) } else { rng.next_2d() };
                 let [x, y] = corners[i as usize];
                 [x + jx, y + jy]

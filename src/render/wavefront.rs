@@ -2,10 +2,10 @@
 //! ray of a bounce is traced in one stream through the packet kernels.
 //!
 //! A batch (the camera samples of one pass over a tile) goes through:
-//! 1. *generate*: the caller queues one path per sample and then their camera rays
-//!    ([`Wavefront::push_paths`], [`Wavefront::set_camera_rays`]);
-//! 2. *trace*: the camera rays as one closest-hit stream; the paths whose ray left the scene
-//!    end there, and the others go on in waves of 1024 paths;
+//! 1. *generate*: the caller queues the camera samples (their random number generators) and
+//!    then their camera rays ([`Wavefront::push_samples`], [`Wavefront::set_camera_rays`]);
+//! 2. *trace*: the camera rays as one closest-hit stream; a sample whose ray left the scene
+//!    ends there, and the others take a path each and go on in waves of 1024 paths;
 //! 3. *shade*: each hit adds its emission, queues its direct-lighting samples (shadow rays, or
 //!    hemisphere rays under `-H`), samples its BSDF and plays Russian roulette
 //!    ([`Integrator::shade`], then [`Integrator::scatter`] for the same path), writing the
@@ -140,13 +140,13 @@ impl Wavefront {
     /// Adds a camera sample drawing from each generator of `rngs` (its path's, if its camera
     /// ray hits); their camera rays follow with [`Wavefront::set_camera_rays`].
     #[inline]
-    pub fn push_paths(&mut self, rngs: impl Iterator<Item = Rng>) {
+    pub fn push_samples(&mut self, rngs: impl Iterator<Item = Rng>) {
         self.rngs.extend(rngs);
     }
 
     /// The random number generators of the batch's camera samples, in order (a camera
     /// sample's own numbers, such as its position in the pixel, are drawn from them first).
-    pub fn path_rngs(&mut self) -> impl Iterator<Item = &mut Rng> {
+    pub fn sample_rngs(&mut self) -> impl Iterator<Item = &mut Rng> {
         self.rngs.iter_mut()
     }
 
