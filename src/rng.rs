@@ -35,9 +35,15 @@ impl RngStreams {
     #[inline]
     pub fn stream(&self, stream: u64) -> Rng {
         // PCG32's seeding (`state = 0`, a step, `state += seed`, a step) in closed form.
-        let inc = (splitmix64(stream ^ 0xDA3E_39CB_94B9_5BDB) << 1) | 1;
+        let inc = stream_increment(stream);
         Rng { state: inc.wrapping_add(self.mixed_seed).wrapping_mul(PCG_MULTIPLIER).wrapping_add(inc), inc }
     }
+}
+
+/// PCG32's increment (odd) for stream `stream`.
+#[inline]
+fn stream_increment(stream: u64) -> u64 {
+    (splitmix64(stream ^ 0xDA3E_39CB_94B9_5BDB) << 1) | 1
 }
 
 /// PCG32's LCG multiplier.
@@ -46,7 +52,7 @@ const PCG_MULTIPLIER: u64 = 6_364_136_223_846_793_005;
 impl Rng {
     /// A generator for stream `stream` (e.g. a pixel index) of the render seeded `seed`.
     pub fn new(seed: u64, stream: u64) -> Self {
-        let mut r = Self { state: 0, inc: (splitmix64(stream ^ 0xDA3E_39CB_94B9_5BDB) << 1) | 1 };
+        let mut r = Self { state: 0, inc: stream_increment(stream) };
         r.next_u32();
         r.state = r.state.wrapping_add(splitmix64(seed));
         r.next_u32();

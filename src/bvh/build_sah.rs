@@ -499,8 +499,7 @@ fn choose_split(
         return must_split.then(|| with_total(median_split(prims, cb)));
     }
     let k = bins_for(ctx, n);
-    let maps: [(f32, f32); 3] =
-        std::array::from_fn(|a| if ext[a] > 0.0 { bin_mapping(cb, a, k) } else { (cb.lower[a], 0.0) });
+    let maps = bin_mappings(cb, k);
     bin_prims(prims, &maps, k, &mut scratch.bins, &mut scratch.bins2);
     let mut best = (f32::INFINITY, 0usize, 0usize); // (cost, axis, split bin)
     for axis in (0..3).filter(|&a| ext[a] > 0.0) {
@@ -646,6 +645,13 @@ fn bins_for(ctx: &Ctx, n: usize) -> usize {
 fn bin_mapping(cb: &Box4, axis: usize, k: usize) -> (f32, f32) {
     let ext = cb.extent()[axis];
     (cb.lower[axis], k as f32 * (1.0 - 1e-6) / ext)
+}
+
+/// [`bin_mapping`] of each axis of `cb` with an extent; the others map every centroid to bin 0.
+#[inline]
+fn bin_mappings(cb: &Box4, k: usize) -> [(f32, f32); 3] {
+    let ext = cb.extent();
+    std::array::from_fn(|a| if ext[a] > 0.0 { bin_mapping(cb, a, k) } else { (cb.lower[a], 0.0) })
 }
 
 /// Fills the first `k` bins of each axis of `bins` with `prims`; large inputs bin in
@@ -943,9 +949,7 @@ mod tests {
                 .collect();
             let cb = PrimInfo::of(&prims).centroids;
             let k = 4 + len / 20;
-            let ext = cb.extent();
-            let maps: [(f32, f32); 3] =
-                std::array::from_fn(|a| if ext[a] > 0.0 { bin_mapping(&cb, a, k) } else { (cb.lower[a], 0.0) });
+            let maps = bin_mappings(&cb, k);
             bin_prims(&prims, &maps, k, &mut scratch.bins, &mut scratch.bins2);
             for (a, &(lo, scale)) in maps.iter().enumerate() {
                 let mut want = vec![Bin::EMPTY; k];

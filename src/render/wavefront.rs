@@ -180,9 +180,9 @@ impl Wavefront {
         resize(&mut c.hits, c.rays.len(), Hit::MISS);
         tracer.closest_batch(&c.rays, &mut c.hits);
         clock.lap(&mut times.trace[RayKind::Camera as usize]);
-        self.radiance.clear();
         if !integrator.traces_paths() {
             let values = c.rays.iter().zip(&c.hits).map(|(ray, hit)| integrator.camera_only(ray, hit));
+            self.radiance.clear();
             self.radiance.extend(values);
             clock.lap(&mut times.shade);
             return;
@@ -195,13 +195,11 @@ impl Wavefront {
             (&self.rngs, &mut self.radiance, &mut self.paths, &mut self.sample_of, &mut self.direct);
         paths.clear();
         sample_of.clear();
-        c.owner.clear();
         let mut n = 0;
         for k in 0..c.rays.len() {
             let (ray, hit) = (c.rays[k], c.hits[k]);
             if hit.is_hit() {
                 (c.rays[n], c.hits[n]) = (ray, hit);
-                c.owner.push(n as u32);
                 paths.push(PathState::new(rngs[k].clone()));
                 sample_of.push(k as u32);
                 n += 1;
@@ -214,6 +212,9 @@ impl Wavefront {
         }
         c.rays.truncate(n);
         c.hits.truncate(n);
+        // Camera ray `i` of the compacted queue is path `i`'s.
+        c.owner.clear();
+        c.owner.extend(0..n as u32);
         clock.lap(&mut times.shade);
         // The paths go on in waves of WAVE_PATHS, whose queues stay in the cache.
         for start in (0..n).step_by(WAVE_PATHS) {
