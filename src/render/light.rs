@@ -451,18 +451,20 @@ mod tests {
         assert!((e / std::f64::consts::PI - 1.0).abs() < 0.01, "{e}");
     }
 
+    /// Irradiance at `p` (normal `n`) from a uniform polygon of radiance 1, by Lambert's
+    /// formula: E = 1/2 Σ θ_i (n · unit(v_i × v_{i+1})) over the polygon's edges.
+    fn polygon_irradiance(p: Vec3, n: Vec3, poly: &[Vec3]) -> f64 {
+        let mut e = 0.0f64;
+        for i in 0..poly.len() {
+            let (a, b) = ((poly[i] - p).normalize(), (poly[(i + 1) % poly.len()] - p).normalize());
+            let theta = a.dot(b).clamp(-1.0, 1.0).acos();
+            e += (theta * n.dot(a.cross(b).normalize())) as f64;
+        }
+        0.5 * e.abs()
+    }
+
     #[test]
     fn rect_and_triangle_lights_match_the_polygon_formula() {
-        // Lambert's formula: E = L/2 Σ θ_i (n · unit(v_i × v_{i+1})) over the polygon's edges.
-        fn polygon_irradiance(p: Vec3, n: Vec3, poly: &[Vec3]) -> f64 {
-            let mut e = 0.0f64;
-            for i in 0..poly.len() {
-                let (a, b) = ((poly[i] - p).normalize(), (poly[(i + 1) % poly.len()] - p).normalize());
-                let theta = a.dot(b).clamp(-1.0, 1.0).acos();
-                e += (theta * n.dot(a.cross(b).normalize())) as f64;
-            }
-            0.5 * e.abs()
-        }
         let (c, dx, dy) = (Vec3::new(0.2, 0.1, 1.0), Vec3::new(0.8, 0.0, 0.0), Vec3::new(0.0, 0.6, 0.0));
         let corners =
             [c - dx * 0.5 - dy * 0.5, c + dx * 0.5 - dy * 0.5, c + dx * 0.5 + dy * 0.5, c - dx * 0.5 + dy * 0.5];
@@ -487,6 +489,26 @@ mod tests {
         assert_eq!(set.lights.len(), 1);
         let e = irradiance(&scene, &set.lights[0], p, Vec3::Z, 200_000);
         assert!((e / expect - 1.0).abs() < 0.01, "triangles {e} vs {expect}");
+    }
+
+    /// The built-in Cornell box has one lamp: an area light with a visible quad of the same
+    /// size and radiance (`scenes/README.md`). Light sampling must see it once: the
+    /// irradiance its lights give a point of the floor is the lamp's by Lambert's formula.
+    #[test]
+    fn built_in_lamp_lights_the_floor_once() {
+        let (scene, _) = crate::io::default_scene().commit(&BuildOptions::default());
+        let set = LightSet::new(&scene);
+        assert_eq!(set.num_stand_ins(), 2, "the lamp quad's two triangles stand in for the area light");
+        let Some(SampledLight::Rect { center, dim_x, dim_y, radiance, .. }) = set.lights.first() else {
+            panic!("the area light comes first: {:?}", set.lights)
+        };
+        let (c, dx, dy) = (*center, *dim_x, *dim_y);
+        let lamp = [c - dx * 0.5 - dy * 0.5, c + dx * 0.5 - dy * 0.5, c + dx * 0.5 + dy * 0.5, c - dx * 0.5 + dy * 0.5];
+        for p in [Vec3::new(0.0, -1.0, 0.0), Vec3::new(0.6, -1.0, -0.7)] {
+            let expect = radiance.x as f64 * polygon_irradiance(p, Vec3::Y, &lamp);
+            let e: f64 = set.lights.iter().map(|l| irradiance(&scene, l, p, Vec3::Y, 200_000)).sum();
+            assert!((e / expect - 1.0).abs() < 0.01, "at {p}: {e} from {} lights vs {expect}", set.lights.len());
+        }
     }
 
     #[test]

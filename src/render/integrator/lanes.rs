@@ -519,8 +519,8 @@ mod tests {
     /// Whole batches through the wavefront with the lanes and without (every hit one path at
     /// a time): the same radiance bit for bit, in the built-in Cornell box (diffuse walls
     /// beside a mirror and a glass sphere, so steps mix lanes and single paths) lit by its
-    /// area light and a point light, with several light samples, every integrator view and
-    /// Russian roulette on and off.
+    /// area light, a point light and an emissive triangle (sampled one path at a time), with
+    /// several light samples, every integrator view and Russian roulette on and off.
     #[test]
     fn wavefront_radiance_is_the_same_without_lanes() {
         use crate::render::stats::RayLog;
@@ -529,6 +529,9 @@ mod tests {
         let mut builder = crate::io::default_scene();
         let centre = builder.bounds().center();
         builder.add_light(crate::scene::Light::Point { position: centre + Vec3::Y * 0.3, intensity: Vec3::splat(0.4) });
+        let glow = builder.add_material(crate::Material::emissive(Vec3::splat(2.0)));
+        let tri = [Vec3::new(-0.3, -0.2, -0.98), Vec3::new(0.3, -0.2, -0.98), Vec3::new(0.0, 0.3, -0.98)];
+        builder.add_mesh(&tri, &[[0, 1, 2]], glow).unwrap();
         let (scene, _) = builder.commit(&crate::BuildOptions::default());
         let kinds =
             [IntegratorKind::Global, IntegratorKind::Direct, IntegratorKind::IndirectOnly, IntegratorKind::Bounce];
@@ -543,7 +546,7 @@ mod tests {
             let radiance = |lanes: bool| {
                 let mut integrator = Integrator::new(&scene, &settings);
                 let kinds = integrator.lane_lights.as_ref().map(|l| l.samples.iter().map(|s| s.0.is_some()).collect());
-                // The area light and the point light in the lanes, the emissive lamp quad not.
+                // The area light and the point light in the lanes, the emissive triangle not.
                 assert_eq!(kinds.map(|k: Vec<bool>| (k.contains(&true), k.contains(&false))), Some((true, true)));
                 if !lanes {
                     integrator.lane_lights = None;
