@@ -397,14 +397,17 @@ impl LightSet {
 
 /// True when triangle `v` lies in the rectangle light `(centre, normal, dim_x, dim_y)`: in its
 /// plane and inside its circumscribed disc (with 2% slack, since scene files round the two
-/// descriptions differently).
+/// descriptions differently). "In its plane" allows a gap behind the light of up to 1% of its
+/// size (a lamp quad put just above its light, against the ceiling, as the built-in box's once
+/// was: otherwise the lamp is sampled twice, as the light and as an emitter), but none in
+/// front of it, where the quad would block the light's own shadow rays.
 fn is_stand_in(v: &[Vec3; 3], &(c, n, dx, dy): &(Vec3, Vec3, Vec3, Vec3)) -> bool {
     let size = dx.length() + dy.length();
     let radius = 0.5 * (dx + dy).length().max((dx - dy).length()) * 1.02;
     v.iter().all(|&p| {
         let d = p - c;
         let h = d.dot(n);
-        h.abs() <= 1e-3 * size && (d - n * h).length() <= radius
+        (-1e-2 * size..=1e-3 * size).contains(&h) && (d - n * h).length() <= radius
     })
 }
 
@@ -562,5 +565,33 @@ mod tests {
         assert_eq!(set.emitted(0, Vec3::ONE, Vec3::Z), Vec3::ONE, "seen from below");
         assert_eq!(set.emitted(0, Vec3::ONE, -Vec3::Z), Vec3::ZERO, "seen from above");
         assert_eq!(set.emitted(2, Vec3::ONE, -Vec3::Z), Vec3::ONE);
+    }
+
+    /// A quad 1 cm behind its 1 m light (the built-in box's lamp as it once was) stands in
+    /// for it; 1 cm in front of it (where it would shade the light) or 5 cm behind, not.
+    #[test]
+    fn stand_ins_may_sit_just_behind_their_light() {
+        let stand_ins = |quad_y: f32| {
+            let mut b = SceneBuilder::new();
+            let m = b.add_material(Material::emissive(Vec3::splat(3.0)));
+            let q = [(-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)].map(|(x, z)| Vec3::new(x, quad_y, z));
+            b.add_mesh(&q, &[[0, 1, 2], [0, 2, 3]], m).unwrap();
+            b.add_light(Light::Area {
+                radiance: Vec3::splat(3.0),
+                position: Vec3::new(0.0, 0.98, 0.0),
+                direction: -Vec3::Y,
+                dim_x: Vec3::X,
+                dim_y: Vec3::Z,
+            });
+            let (scene, _) = b.commit(&BuildOptions::default());
+            let set = LightSet::new(&scene);
+            let expect = if set.num_stand_ins() == 2 { 1 } else { 2 };
+            assert_eq!(set.lights.len(), expect, "the quad is a stand-in or a light of its own");
+            set.num_stand_ins()
+        };
+        assert_eq!(stand_ins(0.98), 2, "in the plane");
+        assert_eq!(stand_ins(0.99), 2, "1 cm behind");
+        assert_eq!(stand_ins(0.97), 0, "1 cm in front");
+        assert_eq!(stand_ins(1.03), 0, "5 cm behind");
     }
 }
