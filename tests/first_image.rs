@@ -1,6 +1,6 @@
 //! The README's first render: the built-in Cornell box without flags gets its own sampling
-//! defaults (global illumination, several samples, samples clamped against fireflies), while a scene file keeps CS184's flag
-//! defaults (`-s 1 -l 1 -m 1`).
+//! defaults (global illumination, several samples and light samples), while a scene file keeps
+//! CS184's flag defaults (`-s 1 -l 1 -m 1`); neither clamps its samples unless asked to.
 
 use std::path::Path;
 use std::process::Command;
@@ -26,11 +26,11 @@ fn built_in_box_defaults_to_global_illumination_and_files_to_cs184_flags() {
     let dir = tempfile::tempdir().unwrap();
     let p = |n: &str| dir.path().join(n);
     let default = render(&[], &p("default.png"));
-    let explicit = render(&["-s", "128", "-l", "2", "-m", "5", "--clamp", "10"], &p("explicit.png"));
-    assert_eq!(default, explicit, "the built-in box's defaults are -s 128 -l 2 -m 5 --clamp 10");
+    let explicit = render(&["-s", "128", "-l", "2", "-m", "5", "--clamp", "inf"], &p("explicit.png"));
+    assert_eq!(default, explicit, "the built-in box's defaults are -s 128 -l 2 -m 5, no clamp");
     // Direct light only (CS184's defaults, asked for explicitly) is darker: indirect light
     // only adds.
-    let cs184 = render(&["-s", "128", "-l", "2", "-m", "1", "--clamp", "10"], &p("direct.png"));
+    let cs184 = render(&["-s", "128", "-l", "2", "-m", "1"], &p("direct.png"));
     assert!(mean(&default) > mean(&cs184) * 1.05, "{} vs {}", mean(&default), mean(&cs184));
 
     // A scene file without flags renders exactly as with -s 1 -l 1 -m 1.
@@ -40,7 +40,8 @@ fn built_in_box_defaults_to_global_illumination_and_files_to_cs184_flags() {
     let b = render(&[file, "-s", "1", "-l", "1", "-m", "1"], &p("file_flags.png"));
     assert_eq!(a, b);
     assert_ne!(a, default);
-    // --clamp inf keeps every sample: the box without a clamp differs from its default.
-    let unclamped = render(&["--clamp", "inf"], &p("unclamped.png"));
-    assert_ne!(unclamped, default);
+    // A clamp below the lamp's radiance (3) scales samples down: the box differs from its
+    // default.
+    let clamped = render(&["--clamp", "1"], &p("clamped.png"));
+    assert_ne!(clamped, default);
 }

@@ -227,8 +227,7 @@ struct RenderArgs {
     #[arg(long)]
     no_russian_roulette: bool,
     /// Scale down any camera sample whose radiance exceeds V in an RGB component (pbrt-v4's
-    /// maxcomponentvalue): removes fireflies at the cost of some bias. Default: 10 for the
-    /// built-in box, none (`inf`) for a scene file.
+    /// maxcomponentvalue): removes fireflies at the cost of some bias. Default: none (`inf`).
     #[arg(long, value_name = "V")]
     clamp: Option<f32>,
     /// Seed of all random numbers.

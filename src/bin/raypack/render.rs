@@ -98,7 +98,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             brute_force: a.brute_force,
             russian_roulette: !a.no_russian_roulette,
             stream_order: None,
-            max_sample_value: a.clamp.or(defaults.max_sample_value).filter(|v| v.is_finite()),
+            max_sample_value: a.clamp.filter(|v| v.is_finite()),
         };
         let format = render::ImageFormat::of(&output);
         let exr = format == render::ImageFormat::Exr;
@@ -314,21 +314,20 @@ struct SamplingDefaults {
     samples: u32,
     light_samples: u32,
     max_depth: u32,
-    max_sample_value: Option<f32>,
 }
 
 impl SamplingDefaults {
     /// CS184's flag defaults (1 sample, 1 light sample, depth 1) for a scene file; for the
     /// built-in Cornell box, what makes the README's first render a converged-looking image
     /// with global illumination, soft shadows, a mirror and a glass sphere in a few seconds on
-    /// 2 cores (128 samples, 2 light samples, depth 5, samples clamped at 10: the lamp's
-    /// radiance is 3, and the rare paths above 10, about one camera sample in 10^5, are what
-    /// showed as white specks on the walls at 128 samples).
+    /// 2 cores (128 samples, 2 light samples, depth 5). No clamp: with its lamp sampled once
+    /// (radiance 3), none of its 22 million camera samples exceeds 10, where one in 10^5 did
+    /// while the lamp counted twice (then the default was `--clamp 10`, against white specks).
     fn for_scene(file: bool) -> Self {
         if file {
-            Self { samples: 1, light_samples: 1, max_depth: 1, max_sample_value: None }
+            Self { samples: 1, light_samples: 1, max_depth: 1 }
         } else {
-            Self { samples: 128, light_samples: 2, max_depth: 5, max_sample_value: Some(10.0) }
+            Self { samples: 128, light_samples: 2, max_depth: 5 }
         }
     }
 }
