@@ -67,6 +67,9 @@ pub struct BenchSettings {
     pub ray_sets: Option<Vec<raysets::RaySet>>,
     /// Builds of each of Embree's structures (the median is reported).
     pub build_runs: usize,
+    /// Build Embree's scenes with `RTC_SCENE_FLAG_ROBUST` (conservative traversal and a
+    /// watertight triangle test), to race raypack's watertight trees at equal robustness.
+    pub embree_robust: bool,
 }
 
 impl Default for BenchSettings {
@@ -76,6 +79,7 @@ impl Default for BenchSettings {
             height: 768,
             runs: 5,
             build_runs: 1,
+            embree_robust: false,
             against_embree: false,
             threads: vec![1, 0],
             seed: 1,
@@ -331,7 +335,12 @@ pub fn run_bench(
         let mut v = Vec::new();
         for q in [EmbreeQuality::Medium, EmbreeQuality::High] {
             log(&format!("building Embree BVH ({})", q.name()));
-            let options = raypack::embree::EmbreeOptions { quality: q, max_isa: settings.isa, ..Default::default() };
+            let options = raypack::embree::EmbreeOptions {
+                quality: q,
+                max_isa: settings.isa,
+                robust: settings.embree_robust,
+                ..Default::default()
+            };
             let mut e = EmbreeScene::with_options(scene, options)?;
             let mut times = vec![e.build_time()];
             for _ in 1..settings.build_runs.max(1) {
@@ -353,9 +362,10 @@ pub fn run_bench(
         };
         report.embree = Some(EmbreeIdentity { version: e.version(), isa: isa.to_string() });
         report.notes.push(format!(
-            "Embree {} (max_isa {}): native 8-wide packets {}, 16-wide {}",
+            "Embree {} (max_isa {}{}): native 8-wide packets {}, 16-wide {}",
             e.version(),
             settings.isa.map_or("none", |i| i.name()),
+            if settings.embree_robust { ", RTC_SCENE_FLAG_ROBUST" } else { "" },
             if e.native_packets(EmbreeWidth::W8) { "yes" } else { "no (emulated)" },
             if e.native_packets(EmbreeWidth::W16) { "yes" } else { "no (emulated)" },
         ));
@@ -852,6 +862,7 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
         runs: a.runs,
         build_runs: a.build_runs,
         against_embree: a.against.is_some(),
+        embree_robust: a.watertight,
         isa: a.isa,
         methods: a.methods.clone(),
         threads: if a.threads.is_empty() { vec![1, 0] } else { a.threads.clone() },
@@ -1059,6 +1070,34 @@ mod tests {
         assert!(loaded.busy_reason(2).unwrap().contains("load average was 1.50 on 2"));
         let stolen = Load { steal: Some(0.1), ..idle };
         assert!(stolen.busy_reason(2).unwrap().contains("stole 10.0%"));
+    }
+
+    /// `--watertight --against embree`: raypack's watertight tree against Embree's robust
+    /// mode, both finding the same hits on every set.
+    #[cfg(feature = "embree")]
+    #[test]
+    fn watertight_races_embree_in_robust_mode() {
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::default());
+        let s = uv_sphere(16, 24);
+        b.add_mesh(&s.positions, &s.indices, m).unwrap();
+        let (scene, _) = b.commit(&BuildOptions { watertight: true, ..BuildOptions::default() });
+        let build = BuildFigures::from_times("raypack", "medium".into(), &[Duration::ZERO], 0);
+        let settings = BenchSettings {
+            width: 32,
+            height: 24,
+            runs: 1,
+            threads: vec![1],
+            against_embree: true,
+            embree_robust: true,
+            ..Default::default()
+        };
+        let mut trees = [RaypackTree { quality: "medium".into(), scene, build }];
+        let report = run_bench("sphere", &mut trees, &settings, &mut |_| {}).unwrap();
+        assert!(report.notes.iter().any(|n| n.contains("RTC_SCENE_FLAG_ROBUST")), "{:?}", report.notes);
+        let embree: Vec<_> = report.rows.iter().filter(|r| r.tracer == "embree").collect();
+        assert!(embree.len() >= 6, "Embree's calls on the three sets");
+        assert!(report.rows.iter().all(|r| !r.checksum_differs), "{}", report.table());
     }
 
     #[cfg(not(feature = "embree"))]

@@ -111,7 +111,9 @@ struct BenchArgs {
     #[arg(long, value_name = "DIR")]
     bvh_cache: Option<PathBuf>,
     /// Use the watertight triangle test (no ray slips through shared edges) instead of
-    /// Möller–Trumbore.
+    /// Möller–Trumbore; with `--against embree`, Embree's robust mode as well
+    /// (RTC_SCENE_FLAG_ROBUST: conservative traversal, watertight test), so that both tracers
+    /// are robust.
     #[arg(long)]
     watertight: bool,
     /// Run raypack's kernels on this ISA tier (sse, avx2, avx512; default: the CPU's best,
