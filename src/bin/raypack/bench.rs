@@ -919,13 +919,18 @@ mod tests {
     use raypack::kernels::KERNELS;
     use raypack::{BuildOptions, Material, SceneBuilder};
 
-    #[test]
-    fn bench_runs_every_kernel_and_checksums_agree() {
+    /// A UV sphere of 16 × 24 quads, committed with `opts`.
+    fn sphere_scene(opts: &BuildOptions) -> Scene {
         let mut b = SceneBuilder::new();
         let m = b.add_material(Material::default());
         let s = uv_sphere(16, 24);
         b.add_mesh(&s.positions, &s.indices, m).unwrap();
-        let (scene, _) = b.commit(&BuildOptions::default());
+        b.commit(opts).0
+    }
+
+    #[test]
+    fn bench_runs_every_kernel_and_checksums_agree() {
+        let scene = sphere_scene(&BuildOptions::default());
         let build = BuildFigures::from_times("raypack", "medium".into(), &[Duration::ZERO], 0);
         let settings = BenchSettings { width: 32, height: 24, runs: 1, threads: vec![1, 2], ..Default::default() };
         let mut trees = [RaypackTree { quality: "medium".into(), scene, build }];
@@ -947,14 +952,9 @@ mod tests {
 
     #[test]
     fn several_trees_are_timed_under_their_quality_with_one_reference() {
-        let s = uv_sphere(16, 24);
         let mut trees = Vec::new();
         for (name, quality) in [("medium", BuildQuality::Medium), ("high", BuildQuality::High)] {
-            let mut b = SceneBuilder::new();
-            let m = b.add_material(Material::default());
-            b.add_mesh(&s.positions, &s.indices, m).unwrap();
-            let opts = BuildOptions { quality, keep_bvh2: name == "medium", ..BuildOptions::default() };
-            let (scene, _) = b.commit(&opts);
+            let scene = sphere_scene(&BuildOptions { quality, keep_bvh2: name == "medium", ..BuildOptions::default() });
             let build = BuildFigures::from_times("raypack", format!("bvh8 {name}"), &[Duration::ZERO], 0);
             trees.push(RaypackTree { quality: name.into(), scene, build });
         }
@@ -1077,11 +1077,7 @@ mod tests {
     #[cfg(feature = "embree")]
     #[test]
     fn watertight_races_embree_in_robust_mode() {
-        let mut b = SceneBuilder::new();
-        let m = b.add_material(Material::default());
-        let s = uv_sphere(16, 24);
-        b.add_mesh(&s.positions, &s.indices, m).unwrap();
-        let (scene, _) = b.commit(&BuildOptions { watertight: true, ..BuildOptions::default() });
+        let scene = sphere_scene(&BuildOptions { watertight: true, ..BuildOptions::default() });
         let build = BuildFigures::from_times("raypack", "medium".into(), &[Duration::ZERO], 0);
         let settings = BenchSettings {
             width: 32,
