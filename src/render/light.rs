@@ -466,11 +466,15 @@ mod tests {
         0.5 * e.abs()
     }
 
+    /// The corners, in order around it, of the rectangle of centre `c` and sides `dx`, `dy`.
+    fn rect_corners(c: Vec3, dx: Vec3, dy: Vec3) -> [Vec3; 4] {
+        [c - dx * 0.5 - dy * 0.5, c + dx * 0.5 - dy * 0.5, c + dx * 0.5 + dy * 0.5, c - dx * 0.5 + dy * 0.5]
+    }
+
     #[test]
     fn rect_and_triangle_lights_match_the_polygon_formula() {
         let (c, dx, dy) = (Vec3::new(0.2, 0.1, 1.0), Vec3::new(0.8, 0.0, 0.0), Vec3::new(0.0, 0.6, 0.0));
-        let corners =
-            [c - dx * 0.5 - dy * 0.5, c + dx * 0.5 - dy * 0.5, c + dx * 0.5 + dy * 0.5, c - dx * 0.5 + dy * 0.5];
+        let corners = rect_corners(c, dx, dy);
         let p = Vec3::new(0.5, -0.3, 0.0);
         let expect = polygon_irradiance(p, Vec3::Z, &corners);
         let scene = empty_scene();
@@ -506,7 +510,7 @@ mod tests {
             panic!("the area light comes first: {:?}", set.lights)
         };
         let (c, dx, dy) = (*center, *dim_x, *dim_y);
-        let lamp = [c - dx * 0.5 - dy * 0.5, c + dx * 0.5 - dy * 0.5, c + dx * 0.5 + dy * 0.5, c - dx * 0.5 + dy * 0.5];
+        let lamp = rect_corners(c, dx, dy);
         for p in [Vec3::new(0.0, -1.0, 0.0), Vec3::new(0.6, -1.0, -0.7)] {
             let expect = radiance.x as f64 * polygon_irradiance(p, Vec3::Y, &lamp);
             let e: f64 = set.lights.iter().map(|l| irradiance(&scene, l, p, Vec3::Y, 200_000)).sum();
