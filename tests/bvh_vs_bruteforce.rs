@@ -236,3 +236,42 @@ fn reference_queries_without_the_binary_bvh_fall_back_to_brute_force() {
     }
     assert!(hits > 500, "too few hits to mean anything: {hits}");
 }
+
+/// `Scene::cone_may_hit` answers "no" only when no ray of the cone hits anything: random
+/// cones (narrow and wide) through a sparse soup of triangles and spheres, on every ISA tier,
+/// against rays of the cone tested against every primitive.
+#[test]
+fn cones_are_culled_only_when_no_ray_of_them_hits() {
+    let soup = random_soup(400, 0.06, 9);
+    let spheres = [(Vec3::new(0.2, 0.3, 0.4), 0.05), (Vec3::new(0.8, 0.6, 0.3), 0.08)];
+    for watertight in [false, true] {
+        let scene = scene_of(&[&soup], &spheres, &BuildOptions { watertight, ..BuildOptions::default() });
+        let (c, e) = (scene.bounds().center(), scene.bounds().extent());
+        for (isa, scene) in common::on_every_isa(&scene) {
+            let mut rng = raypack::rng::Rng::new(4, watertight as u64);
+            let mut r3 = move || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+            let (mut culled, mut hit) = (0, 0);
+            for k in 0..3000 {
+                let origin = c + (r3() - 0.5) * e * 3.0;
+                let towards = (c + (r3() - 0.5) * e - origin).normalize();
+                let half = Vec3::splat([0.001, 0.01, 0.05, 0.2][k % 4]) * (r3() + 0.5);
+                let (lo, hi) = (towards - half, towards + half);
+                let may_hit = scene.cone_may_hit(origin, lo, hi);
+                if (0..3).any(|a| lo[a] <= 0.0 && hi[a] >= 0.0) {
+                    assert!(may_hit, "{isa}: a cone across a coordinate plane is never culled");
+                    continue;
+                }
+                culled += !may_hit as usize;
+                for _ in 0..32 {
+                    let dir = (lo + (hi - lo) * r3()) * (0.1 + 10.0 * r3().x);
+                    let ray = Ray::new(origin, dir);
+                    if scene.intersect1_brute_force(&ray).is_hit() {
+                        hit += 1;
+                        assert!(may_hit, "{isa}, watertight {watertight}: cone {k} culled, but {ray:?} hits");
+                    }
+                }
+            }
+            assert!(culled > 200 && hit > 1000, "{isa}: {culled} cones culled, {hit} rays hit");
+        }
+    }
+}

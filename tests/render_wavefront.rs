@@ -99,3 +99,62 @@ fn phases_add_up_to_the_thread_time() {
     assert!(p.total() <= out.stats.time, "{p:?} vs {:?}", out.stats.time);
     assert!(out.stats.rays.camera == 32 * 32 * 4 && out.stats.rays.bounce > 0 && out.stats.rays.shadow > 0);
 }
+
+/// Pixels whose camera rays cannot hit the scene are given a miss's value without tracing:
+/// the image, the samples per pixel and the rays traced beside them are what tracing every
+/// camera ray gives, bit for bit, for every integrator view, with an environment light
+/// (misses are not black), adaptive sampling, a clamp, and sample counts that cull single
+/// pixels (16), 2 x 2 blocks (4) and 4 x 4 blocks (1).
+#[test]
+fn culled_pixels_get_the_value_their_rays_would() {
+    let mut b = SceneBuilder::new();
+    let white = b.add_material(Material::diffuse(Vec3::splat(0.7)));
+    let glass = b.add_material(Material::glass(1.5));
+    let s = uv_sphere(8, 16).map_positions(|p| p * 0.6 + Vec3::new(-0.5, 0.0, 0.0));
+    b.add_mesh(&s.positions, &s.indices, white).unwrap();
+    b.add_sphere(Vec3::new(0.7, 0.2, 0.0), 0.4, glass).unwrap();
+    b.add_light(Light::Point { position: Vec3::new(1.0, 2.0, 1.0), intensity: Vec3::splat(2.0) });
+    b.add_light(Light::Environment { radiance: Vec3::new(0.3, 0.4, 0.5) });
+    let (scene, _) = b.commit(&BuildOptions::default());
+    let camera = Camera::look_at(Vec3::new(0.0, 0.5, 4.0), Vec3::ZERO, Vec3::Y, 50.0, 1.5, 1e-3, 100.0);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+    let kinds = [
+        IntegratorKind::Normals,
+        IntegratorKind::Direct,
+        IntegratorKind::Global,
+        IntegratorKind::DirectOnly,
+        IntegratorKind::IndirectOnly,
+        IntegratorKind::Bounce,
+    ];
+    for (case, integrator) in kinds.into_iter().enumerate() {
+        for spp in [16, 4, 1] {
+            let mut s = RenderSettings {
+                width: 45,
+                height: 30,
+                samples_per_pixel: spp,
+                max_depth: 3,
+                integrator,
+                adaptive: (case % 2 == 0 && spp > 1).then_some((2, 0.05)),
+                max_sample_value: (case == 2).then_some(0.35),
+                seed: case as u64,
+                ..RenderSettings::default()
+            };
+            let mut render = |culling: bool| {
+                s.pixel_culling = culling;
+                pool.install(|| render::render(&scene, &camera, &s, &|_| {}))
+            };
+            let (all, culled) = (render(false), render(true));
+            let what = format!("{integrator:?}, {spp} spp");
+            assert!(bits(&culled) == bits(&all), "{what}: the image differs");
+            assert_eq!(culled.samples_per_pixel, all.samples_per_pixel, "{what}");
+            assert_eq!(all.stats.culled_samples, 0, "{what}");
+            assert!(culled.stats.culled_samples > all.stats.samples / 4, "{what}: {:?}", culled.stats.culled_samples);
+            assert_eq!(culled.stats.samples, all.stats.samples, "{what}");
+            assert_eq!(culled.stats.rays.camera + culled.stats.culled_samples, all.stats.rays.camera, "{what}");
+            assert_eq!(culled.stats.clamped_samples, all.stats.clamped_samples, "{what}");
+            // (Exactly three bounces off this open scene is too rare for 1 sample per pixel.)
+            let lit = all.film.mean().max_element();
+            assert!(lit > 0.0 || integrator == IntegratorKind::Bounce, "{what}: black image");
+        }
+    }
+}

@@ -552,6 +552,7 @@ fn render<'py>(
         russian_roulette,
         stream_order: None,
         max_sample_value: None,
+        pixel_culling: true,
     };
     let loaded;
     let bound;

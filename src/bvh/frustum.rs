@@ -2,11 +2,16 @@
 //! Hurley, "Multi-Level Ray Tracing Algorithm", SIGGRAPH 2005; Embree's coherent mode): one
 //! 8-wide box test answers "could any ray of the packet hit this child" for all of them.
 
+use crate::bvh::BVH8_STACK;
 use crate::bvh::bvh2::SLAB_WIDEN;
+use crate::bvh::bvh8::Bvh8Ref;
 use crate::bvh::node::Bvh8Node;
+use crate::bvh::node::{LeafKind, NodeRef};
 use crate::bvh::traverse_packet::PacketRays;
 use crate::geometry::{TriBlock, TriangleTest};
-use crate::simd::{Lanes, Vec3x};
+use crate::math::Vec3;
+use crate::simd::{IsaLanes, Lanes, Vec3x};
+use std::mem::MaybeUninit;
 
 /// The interval bounds of a packet of rays whose direction signs agree on every axis, in
 /// lanes `V` of 8 (one per child slot of a node).
@@ -65,7 +70,40 @@ impl<V: Lanes> Frustum<V> {
         for k in 0..7 {
             (lo1[k], hi1[k]) = (lo[k].reduce_min(), hi[k].reduce_max());
         }
-        let (lo, hi) = (lo1, hi1);
+        Self::from_bounds(lo1, hi1)
+    }
+
+    /// The frustum of every ray that leaves `origin` along a positive multiple of a vector
+    /// in the box `[dir_lo, dir_hi]`, over `t` in `[0, inf)`: a cone of rays given by the
+    /// range of their directions (a pixel's camera rays: [`crate::Scene::cone_may_hit`]).
+    /// `None` when the box touches a coordinate plane (some component can be 0 or change sign).
+    ///
+    /// The test is scale-free (`t` is unbounded), so a ray is covered whatever its
+    /// direction's length. The box and the reciprocals are widened by 2^-20 of their
+    /// magnitude, more than the roundings of a ray's normalised direction and of the
+    /// reciprocals: a ray whose exact direction lies in the box is covered as computed.
+    #[inline(always)]
+    pub fn cone(origin: Vec3, dir_lo: Vec3, dir_hi: Vec3) -> Option<Self> {
+        const PAD: f32 = 1.0 / (1 << 20) as f32;
+        let widen = |lo: f32, hi: f32| (lo - lo.abs() * PAD, hi + hi.abs() * PAD);
+        let (mut lo, mut hi) = ([0.0f32; 7], [0.0f32; 7]);
+        for a in 0..3 {
+            let (dlo, dhi) = widen(dir_lo[a], dir_hi[a]);
+            if !(dlo > 0.0 || dhi < 0.0) || !dlo.is_finite() || !dhi.is_finite() {
+                return None;
+            }
+            // 1/x is decreasing on each side of 0: the reciprocals of [dlo, dhi] are [1/dhi, 1/dlo].
+            (lo[3 + a], hi[3 + a]) = widen(1.0 / dhi, 1.0 / dlo);
+            (lo[a], hi[a]) = (origin[a], origin[a]);
+        }
+        (lo[6], hi[6]) = (0.0, f32::INFINITY);
+        Self::from_bounds(lo, hi)
+    }
+
+    /// The frustum of origins in `[lo, hi][0..3]`, reciprocal directions in
+    /// `[lo, hi][3..6]` and `t` in `[lo[6], hi[6]]`.
+    #[inline(always)]
+    fn from_bounds(lo: [f32; 7], hi: [f32; 7]) -> Option<Self> {
         let (tn, tf) = (lo[6], hi[6]);
         let mut near = [0; 3];
         let mut near_org = [0.0; 3];
@@ -142,6 +180,48 @@ impl<V: Lanes> Frustum<V> {
         let tn = tnx.vmax(tny).vmax(tnz.vmax(self.tnear));
         let tf = (tfx.vmin(tfy).vmin(tfz) * V::splat(SLAB_WIDEN)).vmin(V::splat(self.tfar));
         (tn.le(tf).bitmask(), tn)
+    }
+}
+
+impl<T: TriBlock> Bvh8Ref<'_, T> {
+    /// Could a ray of frustum `f` hit a primitive? `false` is exact: no ray of the frustum
+    /// hits anything. `true` may be conservative: some triangle's bounding box (or some
+    /// sphere leaf's box) meets the frustum, or `budget` inner nodes were visited without
+    /// deciding. Depth first, stopping at the first such box.
+    pub fn frustum_may_hit<I: IsaLanes>(&self, f: &Frustum<I::F8>, mut budget: usize) -> bool {
+        let mut stack = [const { MaybeUninit::<NodeRef>::uninit() }; BVH8_STACK];
+        let mut sp = 0;
+        let mut cur = self.root();
+        loop {
+            if !cur.is_leaf() {
+                if budget == 0 {
+                    return true;
+                }
+                budget -= 1;
+                let (mut mask, _) = f.intersect_node(&self.nodes[cur.node_index()]);
+                let node = &self.nodes[cur.node_index()];
+                while mask != 0 {
+                    stack[sp] = MaybeUninit::new(node.children[mask.trailing_zeros() as usize]);
+                    sp += 1;
+                    mask &= mask - 1;
+                }
+            } else if cur.kind() == LeafKind::Spheres {
+                return true;
+            } else {
+                for (k, b) in cur.blocks().enumerate() {
+                    let lanes = cur.lane_mask(k, T::M);
+                    if lanes & f.intersect_triangles::<T, T::Lanes<I>>(&self.tris[b], self.test) != 0 {
+                        return true;
+                    }
+                }
+            }
+            if sp == 0 {
+                return false;
+            }
+            sp -= 1;
+            // SAFETY: entries below `sp` were written by the pushes above.
+            cur = unsafe { stack[sp].assume_init() };
+        }
     }
 }
 

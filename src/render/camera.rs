@@ -15,18 +15,31 @@ pub struct CameraRays {
     tan_y: f32,
     near: f32,
     far: f32,
+    /// The unnormalised direction through image position `(px, py)` is
+    /// `cone_base + px / w * cone_x + py / h * cone_y` (in f64, for [`CameraRays::pixels_cone`]).
+    cone_base: glam::DVec3,
+    cone_x: glam::DVec3,
+    cone_y: glam::DVec3,
 }
 
 impl CameraRays {
     /// Prepares `camera`.
     pub fn new(camera: &Camera) -> Self {
+        let tan_x = (camera.hfov_deg.to_radians() * 0.5).tan();
+        let tan_y = (camera.vfov_deg.to_radians() * 0.5).tan();
+        let [cx, cy, cz] = [camera.c2w.x_axis, camera.c2w.y_axis, camera.c2w.z_axis].map(|a| a.as_dvec3());
+        let (tx, ty) = (tan_x as f64, tan_y as f64);
         Self {
             position: camera.position,
             c2w: camera.c2w,
-            tan_x: (camera.hfov_deg.to_radians() * 0.5).tan(),
-            tan_y: (camera.vfov_deg.to_radians() * 0.5).tan(),
+            tan_x,
+            tan_y,
             near: camera.near,
             far: camera.far,
+            // (2 px / w - 1) tan_x cx + (1 - 2 py / h) tan_y cy - cz
+            cone_base: cy * ty - cx * tx - cz,
+            cone_x: cx * (2.0 * tx),
+            cone_y: cy * (-2.0 * ty),
         }
     }
 
@@ -39,6 +52,34 @@ impl CameraRays {
         let y = 1.0 - py / height as f32;
         let d = Vec3::new((2.0 * x - 1.0) * self.tan_x, (2.0 * y - 1.0) * self.tan_y, -1.0);
         Ray::segment(self.position, (self.c2w * d).normalize(), self.near, self.far)
+    }
+
+    /// The cone of every ray [`CameraRays::ray`] gives through the pixels `x0..x1` ×
+    /// `y0..y1`: the camera's position and a box of directions such that each of those rays
+    /// runs along a positive multiple of a vector in the box (for
+    /// [`crate::Scene::cone_may_hit`]).
+    ///
+    /// The unnormalised direction `c2w * ((2 px / w - 1) tan_x, (2 (1 - py / h) - 1) tan_y, -1)`
+    /// is affine in the image position, so over a rectangle it ranges between its values at
+    /// the corners. They are taken, in f64, at the corners of the rectangle grown by 1/16 of
+    /// a pixel on every side, and the box is grown by 2^-18 of its largest component: far more
+    /// than the roundings that move a ray computed in f32 off its exact direction.
+    pub fn pixels_cone(
+        &self,
+        (x0, x1): (usize, usize),
+        (y0, y1): (usize, usize),
+        size: (usize, usize),
+    ) -> (Vec3, Vec3, Vec3) {
+        const GROW: f64 = 1.0 / 16.0;
+        // v(px, py) = base + px ax + py ay, whose range over a rectangle is the sum of its
+        // terms' ranges.
+        let (ax, ay, base) = (self.cone_x / size.0 as f64, self.cone_y / size.1 as f64, self.cone_base);
+        let (xa, xb) = (ax * (x0 as f64 - GROW), ax * (x1 as f64 + GROW));
+        let (ya, yb) = (ay * (y0 as f64 - GROW), ay * (y1 as f64 + GROW));
+        let lo = base + xa.min(xb) + ya.min(yb);
+        let hi = base + xa.max(xb) + ya.max(yb);
+        let pad = glam::DVec3::splat(lo.abs().max(hi.abs()).max_element() / (1 << 18) as f64);
+        (self.position, (lo - pad).as_vec3(), (hi + pad).as_vec3())
     }
 
     /// [`CameraRays::ray`] through each image position of `positions` (`[px, py]`), in order,
@@ -96,6 +137,69 @@ mod tests {
             let b = cam.generate_ray(px / w as f32, 1.0 - py / h as f32);
             assert_eq!(a, b);
         }
+    }
+
+    /// Is `d` a positive multiple of a vector of the box `[lo, hi]`? (In f64: the multiples
+    /// `l` with `lo <= l d <= hi` form an interval per axis; they must share a positive `l`.)
+    fn in_cone(d: Vec3, lo: Vec3, hi: Vec3) -> bool {
+        let (mut a, mut b) = (0.0f64, f64::INFINITY);
+        for k in 0..3 {
+            let (d, lo, hi) = (d[k] as f64, lo[k] as f64, hi[k] as f64);
+            if d == 0.0 {
+                if lo > 0.0 || hi < 0.0 {
+                    return false;
+                }
+                continue;
+            }
+            let (p, q) = if d > 0.0 { (lo / d, hi / d) } else { (hi / d, lo / d) };
+            (a, b) = (a.max(p), b.min(q));
+        }
+        a <= b && b > 0.0
+    }
+
+    #[test]
+    fn pixel_cones_hold_their_pixels_rays() {
+        let mut rng = crate::render::sampler::Rng::new(5, 6);
+        let (mut inside, mut outside) = (0, 0);
+        for k in 0..3000 {
+            let from = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 10.0 - 5.0;
+            let up = if k % 7 == 0 { Vec3::X } else { Vec3::Y };
+            let fov = [0.5, 10.0, 60.0, 120.0, 170.0][k % 5];
+            let cam = Camera::look_at(from, Vec3::ZERO, up, fov, 0.3 + 2.0 * rng.next_f32(), 0.01, 50.0);
+            let (w, h) = (1 + (k * 13) % 4000, 1 + (k * 7) % 3000);
+            let rays = CameraRays::new(&cam);
+            let x0 = (rng.next_f32() * w as f32) as usize % w;
+            let y0 = (rng.next_f32() * h as f32) as usize % h;
+            let (x1, y1) = ((x0 + 1 + k % 3).min(w), (y0 + 1 + k % 2).min(h));
+            let (o, lo, hi) = rays.pixels_cone((x0, x1), (y0, y1), (w, h));
+            assert_eq!(o, cam.position);
+            // The rays through the rectangle's corners (the largest jitter is just below 1)
+            // and through random points of it are in its cone.
+            let below_one = 1.0 - f32::EPSILON / 2.0;
+            let mut through = vec![[x0 as f32, y0 as f32], [(x1 - 1) as f32 + below_one, (y1 - 1) as f32 + below_one]];
+            through.push([x0 as f32, (y1 - 1) as f32 + below_one]);
+            through.push([(x1 - 1) as f32 + below_one, y0 as f32]);
+            for _ in 0..8 {
+                let (px, py) =
+                    (x0 as f32 + rng.next_f32() * (x1 - x0) as f32, y0 as f32 + rng.next_f32() * (y1 - y0) as f32);
+                through.push([px, py]);
+            }
+            let mut out = Vec::new();
+            rays.rays_into(&through, w, h, &mut out);
+            for (r, p) in out.iter().zip(&through) {
+                assert!(
+                    in_cone(r.dir, lo, hi),
+                    "ray through {p:?} of {w} x {h}, pixels {x0}..{x1} x {y0}..{y1}, fov {fov}"
+                );
+                inside += 1;
+            }
+            // A ray a few pixels away is not (so the check can fail).
+            if x1 + 3 < w {
+                let r = rays.ray(x1 as f32 + 3.0, y0 as f32, w, h);
+                outside += !in_cone(r.dir, lo, hi) as usize;
+            }
+        }
+        assert!(inside > 30_000 && outside > 1000, "{inside} inside, {outside} outside");
     }
 
     #[test]

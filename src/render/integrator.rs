@@ -185,6 +185,17 @@ impl<'a> Integrator<'a> {
         matches!(self.bounces, Some((lo, hi)) if lo <= hi)
     }
 
+    /// The value of a camera sample whose ray hits nothing: the environment's radiance when
+    /// the integrator counts the emission a camera ray sees, black otherwise — what
+    /// [`Integrator::shade`] (or [`Integrator::camera_only`]) gives a camera ray's miss, bit
+    /// for bit. It does not depend on the ray (the environment is uniform).
+    pub fn camera_miss(&self) -> Vec3 {
+        match self.bounces {
+            Some((lo, hi)) if lo <= hi && lo == 0 => Vec3::ZERO + Vec3::ONE * self.lights.environment,
+            _ => Vec3::ZERO,
+        }
+    }
+
     /// The value of camera ray `ray` with closest hit `hit` when no path is traced from it:
     /// the normal map for [`IntegratorKind::Normals`], black when no bounce is counted.
     pub fn camera_only(&self, ray: &Ray, hit: &Hit) -> Vec3 {

@@ -4,7 +4,9 @@
 //! buffers and counters (no locks, no allocation per sample). A tile is rendered in passes:
 //! each pass generates a batch of camera rays for the pixels still sampling and traces their
 //! paths together, one bounce at a time, every kind of ray in one stream through the packet
-//! kernels ([`wavefront`]). Each sample `s` of pixel `p` draws its random numbers from its own
+//! kernels ([`wavefront`]). Pixels none of whose camera rays can hit the scene are found first,
+//! by cones of rays over rectangles of pixels ([`crate::Scene::cone_may_hit`]), and take the
+//! value of a miss without tracing. Each sample `s` of pixel `p` draws its random numbers from its own
 //! generator seeded by `(seed, p, s)`, so the image is a pure function of the scene, the
 //! settings and the seed, whatever the thread count.
 
@@ -77,6 +79,12 @@ pub struct RenderSettings {
     /// component equals it. This trades bias (darker caustics) for the rare paths that would
     /// otherwise show as fireflies. `None` keeps every sample as it is (CS184, unbiased).
     pub max_sample_value: Option<f32>,
+    /// Give the pixels none of whose camera rays can hit the scene (their cone of rays
+    /// misses every primitive's box, [`crate::Scene::cone_may_hit`]) a miss's value without
+    /// generating or tracing their rays. The image is the same, bit for bit, either way;
+    /// `false` is for measuring what it saves. (Never with `brute_force`, whose point is to
+    /// test every ray against every primitive.)
+    pub pixel_culling: bool,
 }
 
 impl Default for RenderSettings {
@@ -95,6 +103,7 @@ impl Default for RenderSettings {
             russian_roulette: true,
             stream_order: None,
             max_sample_value: None,
+            pixel_culling: true,
         }
     }
 }
@@ -112,6 +121,10 @@ pub struct RenderStats {
     pub invalid_samples: u64,
     /// Samples scaled down to [`RenderSettings::max_sample_value`].
     pub clamped_samples: u64,
+    /// Camera samples of pixels whose cone of camera rays misses the scene
+    /// ([`crate::Scene::cone_may_hit`]): valued as misses without tracing their rays (and
+    /// not counted among the rays traced).
+    pub culled_samples: u64,
     /// Wall-clock time of the render.
     pub time: Duration,
     /// Thread time of each phase (summed over threads).
@@ -167,6 +180,7 @@ pub fn render(
         log.merge(tile.log);
         stats.invalid_samples += tile.invalid_samples;
         stats.clamped_samples += tile.clamped_samples;
+        stats.culled_samples += tile.culled_samples;
         stats.phases += tile.phases;
         let (x0, y0) = (tx * TILE, ty * TILE);
         let tw = TILE.min(w - x0);
@@ -188,6 +202,7 @@ struct TileResult {
     log: RayLog,
     invalid_samples: u64,
     clamped_samples: u64,
+    culled_samples: u64,
     phases: PhaseTimes,
 }
 
@@ -230,10 +245,32 @@ fn render_tile(
     // The top-left corner of each pixel of the tile, in image coordinates.
     let corners: Vec<[f32; 2]> = (0..npix).map(|i| [(x0 + i % tw) as f32, (y0 + i / tw) as f32]).collect();
     let streams = Rng::streams(settings.seed);
+    // Pixels none of whose camera rays can hit the scene (their cone misses every
+    // primitive's box) take the value of a miss for every sample, without tracing: the same
+    // value, bit for bit, that tracing their rays would give (`Integrator::camera_miss`).
+    let t0 = Instant::now();
+    let mut culled = vec![false; npix];
+    if settings.pixel_culling && !settings.brute_force {
+        let scene = integrator.tracer().scene();
+        let may_hit = |xs: (usize, usize), ys: (usize, usize)| {
+            let (o, lo, hi) = camera.pixels_cone(xs, ys, (w, h));
+            scene.cone_may_hit(o, lo, hi)
+        };
+        // A test costs about as much as three camera samples of a missing ray (generated,
+        // traced, filed): rectangles of fewer than 16 samples are not worth splitting.
+        let edge = match spp {
+            16.. => 1,
+            4..16 => 2,
+            _ => 4,
+        };
+        cull_pixels(&may_hit, edge, (x0, x1), (y0, y1), &mut |x, y| culled[(y - y0) * tw + x - x0] = true);
+    }
+    let miss = integrator.camera_miss();
     let mut log = RayLog::default();
-    let mut phases = PhaseTimes::default();
+    let mut phases = PhaseTimes { generate: t0.elapsed(), ..PhaseTimes::default() };
     let mut invalid = 0u64;
     let mut clamped = 0u64;
+    let mut culled_samples = 0u64;
     // Every pixel still sampling has taken `taken` samples: all start together and a batch
     // adds the same number to each.
     let mut taken = 0u32;
@@ -245,8 +282,15 @@ fn render_tile(
             wavefront.clear();
             owner.clear();
             positions.clear();
-            for (i, est) in pixels.iter().enumerate() {
+            for (i, est) in pixels.iter_mut().enumerate() {
                 if est.done {
+                    continue;
+                }
+                if culled[i] {
+                    for _ in taken..pass_end {
+                        est.add(finish_sample(miss, settings, &mut invalid, &mut clamped));
+                    }
+                    culled_samples += (pass_end - taken) as u64;
                     continue;
                 }
                 let pixel = (y0 + i / tw) * w + x0 + i % tw;
@@ -264,19 +308,8 @@ fn render_tile(
             phases.generate += t0.elapsed();
             wavefront.run(integrator, order, &mut log, &mut phases);
             let t1 = Instant::now();
-            for (mut l, &i) in wavefront.radiance().zip(&owner) {
-                if !l.is_finite() {
-                    invalid += 1;
-                    l = Vec3::ZERO;
-                }
-                if let Some(max) = settings.max_sample_value {
-                    let largest = l.max_element();
-                    if largest > max {
-                        l *= max / largest;
-                        clamped += 1;
-                    }
-                }
-                pixels[i as usize].add(l);
+            for (l, &i) in wavefront.radiance().zip(&owner) {
+                pixels[i as usize].add(finish_sample(l, settings, &mut invalid, &mut clamped));
             }
             taken = pass_end;
             phases.film += t1.elapsed();
@@ -287,5 +320,52 @@ fn render_tile(
         }
         phases.film += t.elapsed();
     }
-    TileResult { pixels, log, invalid_samples: invalid, clamped_samples: clamped, phases }
+    TileResult { pixels, log, invalid_samples: invalid, clamped_samples: clamped, culled_samples, phases }
+}
+
+/// Calls `cull(x, y)` for each pixel of `xs` × `ys` whose cone of camera rays cannot hit the
+/// scene (`may_hit` of a rectangle of pixels is false): the whole rectangle when its cone
+/// misses, else each quarter in turn, down to rectangles of `edge` × `edge` pixels.
+fn cull_pixels(
+    may_hit: &impl Fn((usize, usize), (usize, usize)) -> bool,
+    edge: usize,
+    xs: (usize, usize),
+    ys: (usize, usize),
+    cull: &mut impl FnMut(usize, usize),
+) {
+    if xs.0 >= xs.1 || ys.0 >= ys.1 {
+        return;
+    }
+    if !may_hit(xs, ys) {
+        for y in ys.0..ys.1 {
+            for x in xs.0..xs.1 {
+                cull(x, y);
+            }
+        }
+    } else if xs.1 - xs.0 > edge || ys.1 - ys.0 > edge {
+        let (xm, ym) = ((xs.0 + xs.1).div_ceil(2), (ys.0 + ys.1).div_ceil(2));
+        for (a, b) in [(xs.0, xm), (xm, xs.1)] {
+            for (c, d) in [(ys.0, ym), (ym, ys.1)] {
+                cull_pixels(may_hit, edge, (a, b), (c, d), cull);
+            }
+        }
+    }
+}
+
+/// A camera sample's radiance `l` as the film takes it: black when not finite (counted in
+/// `invalid`), scaled down to [`RenderSettings::max_sample_value`] (counted in `clamped`).
+#[inline]
+fn finish_sample(mut l: Vec3, settings: &RenderSettings, invalid: &mut u64, clamped: &mut u64) -> Vec3 {
+    if !l.is_finite() {
+        *invalid += 1;
+        l = Vec3::ZERO;
+    }
+    if let Some(max) = settings.max_sample_value {
+        let largest = l.max_element();
+        if largest > max {
+            l *= max / largest;
+            *clamped += 1;
+        }
+    }
+    l
 }

@@ -187,14 +187,14 @@ impl Wavefront {
             clock.lap(&mut times.shade);
             return;
         }
-        // A camera ray that leaves the scene ends its sample here (a miss queues nothing): its
-        // path is shaded on the spot and never stored, so that the waves hold only paths
-        // that go on. The others take a path each, in sample order.
+        // A camera ray that leaves the scene ends its sample here with the integrator's
+        // `camera_miss` value (its path would queue nothing) and is never stored, so that the
+        // waves hold only paths that go on. The others take a path each, in sample order.
         resize(&mut self.radiance, c.rays.len(), Vec3::ZERO);
-        let (rngs, radiance, paths, sample_of, direct) =
-            (&self.rngs, &mut self.radiance, &mut self.paths, &mut self.sample_of, &mut self.direct);
+        let (rngs, radiance, paths, sample_of) = (&self.rngs, &mut self.radiance, &mut self.paths, &mut self.sample_of);
         paths.clear();
         sample_of.clear();
+        let miss = integrator.camera_miss();
         let mut n = 0;
         for k in 0..c.rays.len() {
             let (ray, hit) = (c.rays[k], c.hits[k]);
@@ -204,10 +204,7 @@ impl Wavefront {
                 sample_of.push(k as u32);
                 n += 1;
             } else {
-                let mut path = PathState::new(rngs[k].clone());
-                let ends = integrator.shade(&mut path, &ray, &hit, &MISSED, direct, u32::MAX);
-                debug_assert!(ends.is_none());
-                radiance[k] = path.l;
+                radiance[k] = miss;
             }
         }
         c.rays.truncate(n);

@@ -12,6 +12,7 @@
 //! [`OccluderCache`](crate::bvh::traverse_packet::OccluderCache) from packet to packet.
 
 use crate::bvh::{Counter, NoCount};
+use crate::math::Vec3;
 use crate::ray::{Hit, Ray, RayPacket8, RayPacket16};
 use crate::scene::Scene;
 use rayon::prelude::*;
@@ -99,6 +100,28 @@ impl Scene {
         rays.par_chunks(STREAM_CHUNK)
             .zip(hits.par_chunks_mut(STREAM_CHUNK))
             .for_each(|(r, h)| self.intersect_batch(r, h));
+    }
+
+    /// Could any ray from `origin` along a positive multiple of a vector in the box
+    /// `[dir_lo, dir_hi]` hit the scene (a cone of rays, such as the camera rays through one
+    /// pixel)? `false` is exact: none of those rays hits anything, whatever its length or
+    /// interval. `true` may be conservative (a primitive's bounding box meets the cone), and
+    /// is the answer whenever some component of the box can be 0.
+    ///
+    /// ```
+    /// # use raypack::{BuildOptions, Material, SceneBuilder, Vec3};
+    /// let mut b = SceneBuilder::new();
+    /// let m = b.add_material(Material::default());
+    /// b.add_sphere(Vec3::ZERO, 1.0, m)?;
+    /// let (scene, _) = b.commit(&BuildOptions::default());
+    /// let eye = Vec3::new(0.0, 0.0, 5.0);
+    /// // Towards the sphere, and well to its side.
+    /// assert!(scene.cone_may_hit(eye, Vec3::new(0.01, 0.01, -1.0), Vec3::new(0.02, 0.02, -1.0)));
+    /// assert!(!scene.cone_may_hit(eye, Vec3::new(0.5, 0.5, -1.0), Vec3::new(0.6, 0.6, -1.0)));
+    /// # Ok::<(), raypack::SceneError>(())
+    /// ```
+    pub fn cone_may_hit(&self, origin: Vec3, dir_lo: Vec3, dir_hi: Vec3) -> bool {
+        self.bvh8.cone_may_hit_with(self.isa, origin, dir_lo, dir_hi)
     }
 
     /// [`Scene::intersect_stream`] on the calling thread only.

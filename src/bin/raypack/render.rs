@@ -99,6 +99,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             russian_roulette: !a.no_russian_roulette,
             stream_order: None,
             max_sample_value: a.clamp.filter(|v| v.is_finite()),
+            pixel_culling: true,
         };
         let format = render::ImageFormat::of(&output);
         let exr = format == render::ImageFormat::Exr;
@@ -359,6 +360,13 @@ fn report(scene: &Scene, settings: &RenderSettings, out: &render::RenderOutput, 
         s.samples as f64 / px,
         s.samples as f64 / secs / 1e6
     );
+    if s.culled_samples > 0 {
+        eprintln!(
+            "[raypack] {} samples ({:.1}%) of pixels whose cone of camera rays misses the scene took a miss's value without tracing.",
+            s.culled_samples,
+            100.0 * s.culled_samples as f64 / s.samples.max(1) as f64
+        );
+    }
     if s.invalid_samples > 0 {
         eprintln!("[raypack] warning: {} samples were NaN or infinite and counted as black.", s.invalid_samples);
     }
