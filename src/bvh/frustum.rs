@@ -198,8 +198,8 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                     return true;
                 }
                 budget -= 1;
-                let (mut mask, _) = f.intersect_node(&self.nodes[cur.node_index()]);
                 let node = &self.nodes[cur.node_index()];
+                let (mut mask, _) = f.intersect_node(node);
                 while mask != 0 {
                     stack[sp] = MaybeUninit::new(node.children[mask.trailing_zeros() as usize]);
                     sp += 1;
