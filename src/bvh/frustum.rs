@@ -1,6 +1,9 @@
 //! The bounds of a packet of coherent rays, by interval arithmetic (Reshetov, Soupikov and
 //! Hurley, "Multi-Level Ray Tracing Algorithm", SIGGRAPH 2005; Embree's coherent mode): one
-//! 8-wide box test answers "could any ray of the packet hit this child" for all of them.
+//! 8-wide box test answers "could any ray of the packet hit this child" for all of them. The
+//! frustum of a cone of rays ([`Frustum::cone`]: a pixel's camera rays, say) answers the same
+//! down the whole tree ([`Bvh8Ref::frustum_may_hit`]), which the renderer uses to skip pixels
+//! that cannot hit anything.
 
 use crate::bvh::BVH8_STACK;
 use crate::bvh::bvh2::SLAB_WIDEN;

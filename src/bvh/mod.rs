@@ -5,7 +5,8 @@
 //! * [`Bvh2`] is also the scalar reference traversal that faster kernels are tested against.
 //! * [`collapse()`] turns it into the 8-wide [`Bvh8`] ([`Bvh8Node`], SoA leaf blocks) that the
 //!   SIMD kernels of [`traverse1`] (single rays) and [`traverse_packet`] (8/16-ray packets,
-//!   with the [`frustum`] of coherent ones) traverse; [`queries`] holds their entry points,
+//!   with the [`frustum`] of coherent ones; the frustum of a cone of rays also answers
+//!   whether any of them can hit) traverse; [`queries`] holds their entry points,
 //!   instantiated per ISA tier and counting their work through [`counters`].
 
 pub mod array;

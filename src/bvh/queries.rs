@@ -7,6 +7,7 @@
 //! | [`Bvh8::intersect1_with`], [`Bvh8::occluded1_with`] | [`crate::bvh::traverse1`] | one |
 //! | [`Bvh8::intersect_packet_with`], [`Bvh8::occluded_packet_with`] | [`crate::bvh::traverse_packet`] | 8 or 16 (a [`RayPacket`]) |
 //! | [`Bvh8::intersect_stream_with`], [`Bvh8::occluded_stream_with`] | the packet kernels on consecutive packets of the ISA's stream width | any number, on the calling thread |
+//! | [`Bvh8::cone_may_hit_with`] | [`crate::bvh::frustum`] (a cone of rays as one interval frustum) | a cone of them |
 //!
 //! Every query takes the ISA to run on (normally the scene's, [`crate::Scene::isa`]) and a
 //! work [`Counter`] ([`NoCount`] compiles away).
