@@ -191,7 +191,8 @@ impl<'a> Integrator<'a> {
     /// for bit. It does not depend on the ray (the environment is uniform).
     pub fn camera_miss(&self) -> Vec3 {
         match self.bounces {
-            Some((lo, hi)) if lo <= hi && lo == 0 => Vec3::ZERO + Vec3::ONE * self.lights.environment,
+            // Bounce 0 counted (`hi >= 0` always): a fresh path's `l + beta * environment`.
+            Some((0, _)) => Vec3::ZERO + Vec3::ONE * self.lights.environment,
             _ => Vec3::ZERO,
         }
     }

@@ -248,7 +248,7 @@ fn render_tile(
     // Pixels none of whose camera rays can hit the scene (their cone misses every
     // primitive's box) take the value of a miss for every sample, without tracing: the same
     // value, bit for bit, that tracing their rays would give (`Integrator::camera_miss`).
-    let t0 = Instant::now();
+    let cull_start = Instant::now();
     let mut culled = vec![false; npix];
     if settings.pixel_culling && !settings.brute_force {
         let scene = integrator.tracer().scene();
@@ -265,12 +265,14 @@ fn render_tile(
         };
         cull_pixels(&may_hit, edge, (x0, x1), (y0, y1), &mut |x, y| culled[(y - y0) * tw + x - x0] = true);
     }
-    let miss = integrator.camera_miss();
     let mut log = RayLog::default();
-    let mut phases = PhaseTimes { generate: t0.elapsed(), ..PhaseTimes::default() };
+    let mut phases = PhaseTimes { generate: cull_start.elapsed(), ..PhaseTimes::default() };
     let mut invalid = 0u64;
     let mut clamped = 0u64;
     let mut culled_samples = 0u64;
+    // What the film takes for each culled sample, and whether it counts as invalid or clamped.
+    let (mut miss_invalid, mut miss_clamped) = (0u64, 0u64);
+    let miss = finish_sample(integrator.camera_miss(), settings, &mut miss_invalid, &mut miss_clamped);
     // Every pixel still sampling has taken `taken` samples: all start together and a batch
     // adds the same number to each.
     let mut taken = 0u32;
@@ -287,10 +289,12 @@ fn render_tile(
                     continue;
                 }
                 if culled[i] {
-                    for _ in taken..pass_end {
-                        est.add(finish_sample(miss, settings, &mut invalid, &mut clamped));
+                    let n = (pass_end - taken) as u64;
+                    for _ in 0..n {
+                        est.add(miss);
                     }
-                    culled_samples += (pass_end - taken) as u64;
+                    (culled_samples, invalid, clamped) =
+                        (culled_samples + n, invalid + n * miss_invalid, clamped + n * miss_clamped);
                     continue;
                 }
                 let pixel = (y0 + i / tw) * w + x0 + i % tw;
