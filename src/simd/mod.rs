@@ -97,6 +97,16 @@ pub trait Lanes:
     /// `i32`, plus `k` truncated toward zero (`cvttps2dq`). `k` must be finite and within
     /// `i32`'s range, where Rust's `k as i32` agrees.
     fn add_ulps(self, k: Self) -> Self;
+    /// Lane-wise maximum of the lanes' bits read as `i32`: the float maximum where one of the
+    /// two is `+0.0` or above (a negative float reads as a negative integer), with no NaN
+    /// (a NaN reads as an integer too). One cycle of latency where the float maximum takes up
+    /// to four.
+    fn max_bits(self, o: Self) -> Self;
+    /// Lane-wise minimum of the lanes' bits read as `i32` (see [`Lanes::max_bits`]).
+    fn min_bits(self, o: Self) -> Self;
+    /// Bit `i` set where lane `i` of `self` is at most lane `i` of `o`, both read as `i32`:
+    /// the float `<=` where `self` is `+0.0` or above, except that `+0.0 <= -0.0` is false.
+    fn le_bits(self, o: Self) -> u32;
 
     /// Magnitude of each lane (the sign bit cleared).
     #[inline(always)]
@@ -311,6 +321,19 @@ pub(crate) fn check_lanes<V: Lanes>() {
         let want = (pattern[i].to_bits() as i32).wrapping_add(steps[i] as i32) as u32;
         assert_eq!(ulps[i].to_bits(), want, "lane {i}");
     }
+    // The integer order of the bits, against each lane's neighbour (negative floats, -0.0,
+    // infinities and NaN included).
+    let mut rotated = pattern;
+    rotated[..n].rotate_left(1);
+    let c = V::load(&rotated);
+    let (imax, imin, ile) = (a.max_bits(c).to_array(), a.min_bits(c).to_array(), a.le_bits(c));
+    for i in 0..n {
+        let (x, y) = (pattern[i].to_bits() as i32, rotated[i].to_bits() as i32);
+        assert_eq!(imax[i].to_bits() as i32, x.max(y), "max_bits, lane {i}");
+        assert_eq!(imin[i].to_bits() as i32, x.min(y), "min_bits, lane {i}");
+        assert_eq!(ile >> i & 1 == 1, x <= y, "le_bits, lane {i}");
+    }
+    assert_eq!(ile >> n, 0, "no bits past the lanes");
     let bit_and = (V::from_bitmask(0b1010) & V::from_bitmask(0b0110)).bitmask();
     let bit_or = (V::from_bitmask(0b1010) | V::from_bitmask(0b0110)).bitmask();
     let bit_xor = (V::from_bitmask(0b1010) ^ V::from_bitmask(0b0110)).bitmask();

@@ -105,6 +105,25 @@ macro_rules! impl_lanes {
                     f32::from_bits((a[i].to_bits() as i32).wrapping_add(k[i] as i32) as u32)
                 }))
             }
+            #[inline(always)]
+            fn max_bits(self, o: Self) -> Self {
+                let (a, b) = (self.as_array(), o.as_array());
+                <$t>::new(std::array::from_fn(|i| {
+                    if (b[i].to_bits() as i32) > (a[i].to_bits() as i32) { b[i] } else { a[i] }
+                }))
+            }
+            #[inline(always)]
+            fn min_bits(self, o: Self) -> Self {
+                let (a, b) = (self.as_array(), o.as_array());
+                <$t>::new(std::array::from_fn(|i| {
+                    if (b[i].to_bits() as i32) < (a[i].to_bits() as i32) { b[i] } else { a[i] }
+                }))
+            }
+            #[inline(always)]
+            fn le_bits(self, o: Self) -> u32 {
+                let (a, b) = (self.as_array(), o.as_array());
+                (0..$n).fold(0, |m, i| m | (((a[i].to_bits() as i32) <= (b[i].to_bits() as i32)) as u32) << i)
+            }
         }
     };
 }

@@ -230,6 +230,20 @@ impl Lanes for M256 {
         // `vpaddd` is AVX2, which both tiers using `M256` have.
         M256(simd!(_mm256_castsi256_ps(_mm256_add_epi32(_mm256_castps_si256(self.0), _mm256_cvttps_epi32(k.0)))))
     }
+    #[inline(always)]
+    fn max_bits(self, o: Self) -> Self {
+        M256(simd!(_mm256_castsi256_ps(_mm256_max_epi32(_mm256_castps_si256(self.0), _mm256_castps_si256(o.0)))))
+    }
+    #[inline(always)]
+    fn min_bits(self, o: Self) -> Self {
+        M256(simd!(_mm256_castsi256_ps(_mm256_min_epi32(_mm256_castps_si256(self.0), _mm256_castps_si256(o.0)))))
+    }
+    #[inline(always)]
+    fn le_bits(self, o: Self) -> u32 {
+        // `a <= b` is `!(a > b)`: `vpcmpgtd`, then the complement of its eight sign bits.
+        let gt = simd!(_mm256_cmpgt_epi32(_mm256_castps_si256(self.0), _mm256_castps_si256(o.0)));
+        !(simd!(_mm256_movemask_ps(_mm256_castsi256_ps(gt))) as u32) & 0xff
+    }
 }
 
 impl M512 {
@@ -340,6 +354,18 @@ impl Lanes for M512 {
     #[inline(always)]
     fn add_ulps(self, k: Self) -> Self {
         M512(simd!(_mm512_castsi512_ps(_mm512_add_epi32(_mm512_castps_si512(self.0), _mm512_cvttps_epi32(k.0)))))
+    }
+    #[inline(always)]
+    fn max_bits(self, o: Self) -> Self {
+        M512(simd!(_mm512_castsi512_ps(_mm512_max_epi32(_mm512_castps_si512(self.0), _mm512_castps_si512(o.0)))))
+    }
+    #[inline(always)]
+    fn min_bits(self, o: Self) -> Self {
+        M512(simd!(_mm512_castsi512_ps(_mm512_min_epi32(_mm512_castps_si512(self.0), _mm512_castps_si512(o.0)))))
+    }
+    #[inline(always)]
+    fn le_bits(self, o: Self) -> u32 {
+        simd!(_mm512_cmple_epi32_mask(_mm512_castps_si512(self.0), _mm512_castps_si512(o.0))) as u32
     }
 }
 
@@ -460,6 +486,18 @@ impl<V: Lanes> Lanes for Pair<V> {
     #[inline(always)]
     fn add_ulps(self, k: Self) -> Self {
         Pair(self.0.add_ulps(k.0), self.1.add_ulps(k.1))
+    }
+    #[inline(always)]
+    fn max_bits(self, o: Self) -> Self {
+        Pair(self.0.max_bits(o.0), self.1.max_bits(o.1))
+    }
+    #[inline(always)]
+    fn min_bits(self, o: Self) -> Self {
+        Pair(self.0.min_bits(o.0), self.1.min_bits(o.1))
+    }
+    #[inline(always)]
+    fn le_bits(self, o: Self) -> u32 {
+        self.0.le_bits(o.0) | self.1.le_bits(o.1) << V::LANES
     }
 }
 
