@@ -117,7 +117,7 @@ impl<V: Lanes> Ray1<V> {
         let tfz = (V::load(&b[nz ^ 1]) - self.org.z) * self.inv_far.z;
         let tn = tnx.max_bits(tny).max_bits(tnz.max_bits(self.tnear));
         let tf = tfx.min_bits(tfy).min_bits(tfz.min_bits(V::splat(tfar)));
-        (tn.le_bits(tf), tn)
+        (!tn.gt_bits(tf).bitmask() & 0xff, tn)
     }
 
     /// Scalar twin of [`Ray1::intersect_node`]: per slot, the near plane of each axis chosen

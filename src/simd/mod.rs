@@ -104,9 +104,9 @@ pub trait Lanes:
     fn max_bits(self, o: Self) -> Self;
     /// Lane-wise minimum of the lanes' bits read as `i32` (see [`Lanes::max_bits`]).
     fn min_bits(self, o: Self) -> Self;
-    /// Bit `i` set where lane `i` of `self` is at most lane `i` of `o`, both read as `i32`:
-    /// the float `<=` where `self` is `+0.0` or above, except that `+0.0 <= -0.0` is false.
-    fn le_bits(self, o: Self) -> u32;
+    /// True in the lanes where `self` is greater than `o`, both read as `i32`: the float `>`
+    /// where `self` is `+0.0` or above, except that `+0.0 > -0.0` is true.
+    fn gt_bits(self, o: Self) -> Self;
 
     /// Magnitude of each lane (the sign bit cleared).
     #[inline(always)]
@@ -326,14 +326,13 @@ pub(crate) fn check_lanes<V: Lanes>() {
     let mut rotated = pattern;
     rotated[..n].rotate_left(1);
     let c = V::load(&rotated);
-    let (imax, imin, ile) = (a.max_bits(c).to_array(), a.min_bits(c).to_array(), a.le_bits(c));
+    let (imax, imin, igt) = (a.max_bits(c).to_array(), a.min_bits(c).to_array(), a.gt_bits(c).to_array());
     for i in 0..n {
         let (x, y) = (pattern[i].to_bits() as i32, rotated[i].to_bits() as i32);
         assert_eq!(imax[i].to_bits() as i32, x.max(y), "max_bits, lane {i}");
         assert_eq!(imin[i].to_bits() as i32, x.min(y), "min_bits, lane {i}");
-        assert_eq!(ile >> i & 1 == 1, x <= y, "le_bits, lane {i}");
+        assert_eq!(igt[i].to_bits(), if x > y { u32::MAX } else { 0 }, "gt_bits, lane {i}");
     }
-    assert_eq!(ile >> n, 0, "no bits past the lanes");
     let bit_and = (V::from_bitmask(0b1010) & V::from_bitmask(0b0110)).bitmask();
     let bit_or = (V::from_bitmask(0b1010) | V::from_bitmask(0b0110)).bitmask();
     let bit_xor = (V::from_bitmask(0b1010) ^ V::from_bitmask(0b0110)).bitmask();

@@ -120,9 +120,11 @@ macro_rules! impl_lanes {
                 }))
             }
             #[inline(always)]
-            fn le_bits(self, o: Self) -> u32 {
+            fn gt_bits(self, o: Self) -> Self {
                 let (a, b) = (self.as_array(), o.as_array());
-                (0..$n).fold(0, |m, i| m | (((a[i].to_bits() as i32) <= (b[i].to_bits() as i32)) as u32) << i)
+                <$t>::new(std::array::from_fn(|i| {
+                    f32::from_bits((((a[i].to_bits() as i32) > (b[i].to_bits() as i32)) as u32).wrapping_neg())
+                }))
             }
         }
     };

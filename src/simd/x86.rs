@@ -239,10 +239,8 @@ impl Lanes for M256 {
         M256(simd!(_mm256_castsi256_ps(_mm256_min_epi32(_mm256_castps_si256(self.0), _mm256_castps_si256(o.0)))))
     }
     #[inline(always)]
-    fn le_bits(self, o: Self) -> u32 {
-        // `a <= b` is `!(a > b)`: `vpcmpgtd`, then the complement of its eight sign bits.
-        let gt = simd!(_mm256_cmpgt_epi32(_mm256_castps_si256(self.0), _mm256_castps_si256(o.0)));
-        !(simd!(_mm256_movemask_ps(_mm256_castsi256_ps(gt))) as u32) & 0xff
+    fn gt_bits(self, o: Self) -> Self {
+        M256(simd!(_mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_castps_si256(self.0), _mm256_castps_si256(o.0)))))
     }
 }
 
@@ -364,8 +362,11 @@ impl Lanes for M512 {
         M512(simd!(_mm512_castsi512_ps(_mm512_min_epi32(_mm512_castps_si512(self.0), _mm512_castps_si512(o.0)))))
     }
     #[inline(always)]
-    fn le_bits(self, o: Self) -> u32 {
-        simd!(_mm512_cmple_epi32_mask(_mm512_castps_si512(self.0), _mm512_castps_si512(o.0))) as u32
+    fn gt_bits(self, o: Self) -> Self {
+        simd!({
+            let gt = _mm512_cmpgt_epi32_mask(_mm512_castps_si512(self.0), _mm512_castps_si512(o.0));
+            M512(_mm512_castsi512_ps(_mm512_maskz_set1_epi32(gt, -1)))
+        })
     }
 }
 
@@ -496,8 +497,8 @@ impl<V: Lanes> Lanes for Pair<V> {
         Pair(self.0.min_bits(o.0), self.1.min_bits(o.1))
     }
     #[inline(always)]
-    fn le_bits(self, o: Self) -> u32 {
-        self.0.le_bits(o.0) | self.1.le_bits(o.1) << V::LANES
+    fn gt_bits(self, o: Self) -> Self {
+        Pair(self.0.gt_bits(o.0), self.1.gt_bits(o.1))
     }
 }
 
