@@ -61,13 +61,15 @@ impl<V: Lanes> Ray1<V> {
     pub fn new(ray: &Ray) -> Self {
         debug_assert_eq!(V::LANES, 8, "one lane per child slot");
         let inv = ray.inv_dir();
+        // `+ 0.0` turns a `tnear` of `-0.0` into `+0.0` (see `intersect_node`), in the ray
+        // itself so that the node and the triangle tests share one value.
+        let ray = Ray { tnear: ray.tnear + 0.0, ..*ray };
         Self {
-            ray: *ray,
+            ray,
             org: Vec3x::splat(ray.origin),
             inv: Vec3x::splat(inv),
             inv_far: Vec3x::splat(inv * SLAB_WIDEN),
-            // `+ 0.0` turns a `tnear` of `-0.0` into `+0.0`: see `intersect_node`.
-            tnear: V::splat(ray.tnear + 0.0),
+            tnear: V::splat(ray.tnear),
             near: [(inv.x < 0.0) as usize, 2 + (inv.y < 0.0) as usize, 4 + (inv.z < 0.0) as usize],
         }
     }
@@ -82,13 +84,15 @@ impl<V: Lanes> Ray1<V> {
     /// the four-operand minimum and maximum as two levels each, the test's critical path is
     /// 16 cycles of latency on AVX2 instead of 24 (Ice Lake: 4 per add, mul, min, max).
     ///
-    /// The maximum, minimum and comparison read the distances' bits as integers
-    /// ([`Lanes::max_bits`]: `vpmaxsd`, `vpminsd`, `vpcmpgtd`, one cycle each where the float
-    /// forms take two to four), as Embree's kernels do. That is the float test: `tnear` is
-    /// `+0.0` or more (a `-0.0` is made `+0.0` in [`Ray1::new`]) and the reciprocal is finite, so
-    /// no lane is NaN, the entry distance `tn` is the float maximum, and a negative float
-    /// reads as a negative integer, below every `tn`. The one difference, an exit distance of
-    /// `-0.0` against an entry of `+0.0`, is a box the ray leaves exactly at its origin, where
+    /// On AVX2 and above ([`Lanes::INT_ORDER`]) the maximum, minimum and comparison read the
+    /// distances' bits as integers ([`Lanes::max_bits`]: `vpmaxsd`, `vpminsd`, `vpcmpgtd`, one
+    /// cycle each where the float forms take two to four), as Embree's kernels do; on SSE2,
+    /// where those take three or four instructions each, they stay floats. Both give the
+    /// same hits: `tnear` is `+0.0` or more (a `-0.0` is made `+0.0` in [`Ray1::new`]) and
+    /// the reciprocal is finite, so no lane is NaN, the entry distance `tn` is the float
+    /// maximum, and a negative float reads as a negative integer, below every `tn`. The one
+    /// difference, an exit distance of `-0.0` against an entry of `+0.0` (a miss for the
+    /// integers, a hit for the floats), is a box the ray leaves exactly at its origin, where
     /// no hit beyond `tnear` can lie (the subtraction is exact when it gives zero).
     // Callgrind cannot see latency; wall clock, CS184 beetle diffuse rays, single-ray kernel
     // on AVX2, 1 thread: see the commit that made it.
@@ -115,28 +119,41 @@ impl<V: Lanes> Ray1<V> {
         let tfx = (V::load(&b[nx ^ 1]) - self.org.x) * self.inv_far.x;
         let tfy = (V::load(&b[ny ^ 1]) - self.org.y) * self.inv_far.y;
         let tfz = (V::load(&b[nz ^ 1]) - self.org.z) * self.inv_far.z;
-        let tn = tnx.max_bits(tny).max_bits(tnz.max_bits(self.tnear));
-        let tf = tfx.min_bits(tfy).min_bits(tfz.min_bits(V::splat(tfar)));
-        (!tn.gt_bits(tf).bitmask() & 0xff, tn)
+        if V::INT_ORDER {
+            let tn = tnx.max_bits(tny).max_bits(tnz.max_bits(self.tnear));
+            let tf = tfx.min_bits(tfy).min_bits(tfz.min_bits(V::splat(tfar)));
+            (!tn.gt_bits(tf).bitmask() & 0xff, tn)
+        } else {
+            let tn = tnx.vmax(tny).vmax(tnz.vmax(self.tnear));
+            let tf = tfx.vmin(tfy).vmin(tfz.vmin(V::splat(tfar)));
+            (tn.le(tf).bitmask(), tn)
+        }
     }
 
     /// Scalar twin of [`Ray1::intersect_node`]: per slot, the near plane of each axis chosen
     /// by the direction's sign, then the same slab arithmetic (far planes through
-    /// `inv * SLAB_WIDEN`, the maximum, minimum and comparison on the bits as `i32`).
+    /// `inv * SLAB_WIDEN`; the maximum, minimum and comparison on the bits as `i32` where the
+    /// lanes `V` use the integer order, on the floats elsewhere).
     pub fn intersect_node_scalar(&self, n: &Bvh8Node, tfar: f32) -> u32 {
         let (o, inv) = (self.ray.origin, self.ray.inv_dir());
         let inv_far = inv * SLAB_WIDEN;
         let mut mask = 0;
         for i in 0..8 {
             let b = n.child_bounds(i);
-            let bits = |t: f32| t.to_bits() as i32;
-            let (mut tn, mut tf) = (bits(self.ray.tnear + 0.0), bits(tfar));
+            let (mut tn, mut tf) = ([0.0f32; 3], [0.0f32; 3]);
             for a in 0..3 {
                 let (near, far) = if inv[a] < 0.0 { (b.max[a], b.min[a]) } else { (b.min[a], b.max[a]) };
-                tn = tn.max(bits((near - o[a]) * inv[a]));
-                tf = tf.min(bits((far - o[a]) * inv_far[a]));
+                tn[a] = (near - o[a]) * inv[a];
+                tf[a] = (far - o[a]) * inv_far[a];
             }
-            if tn <= tf {
+            let hit = if V::INT_ORDER {
+                let bits = |t: f32| t.to_bits() as i32;
+                let near = tn.iter().fold(bits(self.ray.tnear), |m, &t| m.max(bits(t)));
+                near <= tf.iter().fold(bits(tfar), |m, &t| m.min(bits(t)))
+            } else {
+                tn.iter().fold(self.ray.tnear, |m, &t| m.max(t)) <= tf.iter().fold(tfar, |m, &t| m.min(t))
+            };
+            if hit {
                 mask |= 1 << i;
             }
         }
@@ -392,8 +409,9 @@ mod tests {
                 if k % 4 == 0 {
                     dir[k % 3] = if k % 8 == 0 { 0.0 } else { -0.0 };
                 }
-                let ray =
-                    Ray::segment(r3() * 2.0, dir, (k % 3) as f32 * 0.25, if k % 5 == 0 { 2.0 } else { f32::INFINITY });
+                // tnear 0, -0 (made +0 by `Ray1::new`), 0.25 and 0.5.
+                let tnear = if k % 6 == 3 { -0.0 } else { (k % 3) as f32 * 0.25 };
+                let ray = Ray::segment(r3() * 2.0, dir, tnear, if k % 5 == 0 { 2.0 } else { f32::INFINITY });
                 if !ray.is_valid() {
                     continue;
                 }

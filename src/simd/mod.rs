@@ -57,6 +57,10 @@ pub trait Lanes:
 {
     /// Number of lanes.
     const LANES: usize;
+    /// True where [`Lanes::max_bits`], [`Lanes::min_bits`] and [`Lanes::gt_bits`] are one
+    /// instruction each (AVX2 and above); on SSE2 each is three or four, against one for the
+    /// float forms, so kernels that could use either use the float forms there.
+    const INT_ORDER: bool;
     /// Every lane `x`.
     fn splat(x: f32) -> Self;
     /// Loads `LANES` values from the start of `s` (panics when `s` is shorter).

@@ -26,6 +26,7 @@ macro_rules! impl_lanes {
     ($t:ty, $n:expr) => {
         impl Lanes for $t {
             const LANES: usize = $n;
+            const INT_ORDER: bool = false;
             #[inline(always)]
             fn splat(x: f32) -> Self {
                 <$t>::splat(x)

@@ -147,6 +147,7 @@ impl M256 {
 
 impl Lanes for M256 {
     const LANES: usize = 8;
+    const INT_ORDER: bool = true;
     #[inline(always)]
     fn splat(x: f32) -> Self {
         M256(simd!(_mm256_set1_ps(x)))
@@ -273,6 +274,7 @@ impl M512 {
 
 impl Lanes for M512 {
     const LANES: usize = 16;
+    const INT_ORDER: bool = true;
     #[inline(always)]
     fn splat(x: f32) -> Self {
         M512(simd!(_mm512_set1_ps(x)))
@@ -411,6 +413,7 @@ impl<V: Lanes> Not for Pair<V> {
 
 impl<V: Lanes> Lanes for Pair<V> {
     const LANES: usize = 2 * V::LANES;
+    const INT_ORDER: bool = V::INT_ORDER;
     #[inline(always)]
     fn splat(x: f32) -> Self {
         Pair(V::splat(x), V::splat(x))
