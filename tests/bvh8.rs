@@ -314,6 +314,18 @@ fn bvh8_invariants_for_every_collapse() {
         let used = (0..8).filter(|&i| !n.children[i].is_empty()).fold(0u32, |m, i| m | 1 << i);
         assert_eq!(mask & !used, 0, "an empty slot was hit");
     }
+    // Inner children come first, at consecutive indices (`Bvh8Node::inner_child`, which the
+    // single-ray kernels follow): two inner slots swapped are rejected.
+    let bounds = prim_bounds(&scene);
+    let mut forged = scene.bvh8().clone();
+    let (i, n) = forged.nodes.iter().enumerate().find(|(_, n)| !n.children[1].is_leaf()).expect("two inner children");
+    let mut swapped = *n;
+    let (b0, b1) = (n.child_bounds(0), n.child_bounds(1));
+    swapped.set_child(0, &b1, n.children[1]);
+    swapped.set_child(1, &b0, n.children[0]);
+    forged.nodes[i] = swapped;
+    let err = validate_bvh8(&forged, &bounds).expect_err("inner children out of place");
+    assert!(err.contains("out of place"), "{err}");
 }
 
 #[test]

@@ -16,7 +16,8 @@ pub type DefaultTriBlock = Tri8;
 /// empty tree is a root with eight empty slots).
 #[derive(Clone, Debug)]
 pub struct Bvh8<T: TriBlock = DefaultTriBlock> {
-    /// Inner nodes; children of a node that are inner nodes are stored consecutively.
+    /// Inner nodes; the inner children of a node are stored consecutively, in its first slots
+    /// ([`Bvh8Node`]).
     pub nodes: BvhArray<Bvh8Node>,
     /// Triangle blocks; a leaf's blocks are consecutive.
     pub tris: BvhArray<T>,

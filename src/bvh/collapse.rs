@@ -387,7 +387,17 @@ impl<'a, S: Fn(u32) -> PrimShape + Sync> Emitter<'a, S> {
             }
             CollapseMethod::Greedy => greedy_forest(self.p, n, &mut kids),
         }
-        kids
+        // Inner roots first, each group in forest order: the layout invariant of `Bvh8Node`
+        // (slot `i < k` holds node `first + i`).
+        let mut ordered = Kids::default();
+        for leaves in [false, true] {
+            for &c in kids.as_slice() {
+                if self.is_leaf_root(c) == leaves {
+                    ordered.push(c);
+                }
+            }
+        }
+        ordered
     }
 
     /// The triangle leaf roots among `kids` that share blocks: those of at most `m`

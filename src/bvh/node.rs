@@ -162,6 +162,13 @@ impl NodeRef {
 /// test needs no per-lane min/max. An empty slot has lower `+inf` and upper `-inf`: whatever
 /// the direction, its entry distance is `+inf` and its exit `-inf`, so it is never hit.
 ///
+/// Inner children come first: a node with `k` inner children holds them in slots `0..k`, as
+/// nodes `children[0].node_index() + 0..k` (the collapse allocates siblings consecutively),
+/// then its leaves, then its empty slots. So the node of inner slot `i` is
+/// [`Bvh8Node::inner_child`]`(i)`, which a single-ray kernel computes from `i` without waiting
+/// for the load of `children[i]` (see [`crate::bvh::traverse1`]). The index checks of
+/// [`crate::bvh::validate`] enforce it.
+///
 /// ```
 /// use raypack::{BuildOptions, Bvh8Node, Material, SceneBuilder, Vec3};
 ///
@@ -217,6 +224,14 @@ impl Bvh8Node {
             self.bounds[2 * axis + 1][i] = b.max[axis];
         }
         self.children[i] = child;
+    }
+
+    /// The reference of slot `i` when it holds an inner node: `children[0]`'s index plus `i`,
+    /// by the layout invariant (inner children first, at consecutive indices). Meaningless
+    /// for the other slots.
+    #[inline(always)]
+    pub fn inner_child(&self, i: usize) -> NodeRef {
+        NodeRef::inner((self.children[0].0 as u32).wrapping_add(i as u32))
     }
 
     /// The box of slot `i` ([`Aabb::EMPTY`] for empty slots).

@@ -2,7 +2,8 @@
 //!
 //! * [`check_bvh2_indices`] and [`check_bvh8_indices`]: what the traversals index with. Every
 //!   child, block and primitive reference is in range, each node is reached once, the depth
-//!   stays within [`MAX_DEPTH`] and empty slots can never be hit, so that even a forged tree
+//!   stays within [`MAX_DEPTH`], empty slots can never be hit and a BVH8 node's inner children
+//!   are where [`crate::bvh::Bvh8Node::inner_child`] says, so that even a forged tree
 //!   cannot make a query panic. One linear pass, cheap enough for every start from the BVH
 //!   cache (`scene::cache`), which runs it on each file it loads.
 //! * [`validate_bvh2`] and [`validate_bvh8`]: those, plus the geometry. Every box holds its
@@ -89,6 +90,11 @@ pub fn check_bvh8_indices<T: TriBlock>(b8: &Bvh8<T>, num_prims: usize) -> Result
                 let j = c.node_index();
                 if j <= i || j >= b8.nodes.len() || d as usize >= MAX_DEPTH {
                     return Err(format!("node {i} has child {k} out of range or too deep"));
+                }
+                if n.inner_child(k) != c {
+                    return Err(format!(
+                        "node {i} has inner child {k} out of place (inner children first, consecutive)"
+                    ));
                 }
                 if std::mem::replace(&mut depth[j], d + 1) != 0 {
                     return Err(format!("node {j} reached twice"));

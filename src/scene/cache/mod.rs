@@ -52,7 +52,7 @@ use xxhash_rust::xxh3::Xxh3;
 
 /// Version of the file layout and of everything the key does not see; bump it whenever the
 /// builder, the collapse or a block layout changes what a given key would produce.
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 /// First eight bytes of every cache file (the `\r\n` catches text-mode mangling, as PNG's does).
 pub const MAGIC: [u8; 8] = *b"RPKBVH\r\n";
 /// File name extension of cache files.
