@@ -161,19 +161,22 @@ impl<V: Lanes> Ray1<V> {
     }
 }
 
-impl<T: TriBlock> Bvh8Ref<'_, T> {
-    /// The node of inner slot `i` of `node` ([`Bvh8Node::inner_child`]): slot 0's node, whose
-    /// reference is loaded with `node`, plus `i` nodes. The next node's address then waits
-    /// only for `i`, the box test's outcome: not for the load of `children[i]`, which the
-    /// kernels read only to tell a node from a leaf, a branch the processor predicts, and not
-    /// for an index's shift and base (one shift and one add after `i`). One L1 load less on
-    /// the chain of dependent latencies that a node step is (PERFORMANCE.md, "Inner children
-    /// computed, not loaded").
-    #[inline(always)]
-    fn inner_child_node(&self, node: &Bvh8Node, i: usize) -> &Bvh8Node {
-        &self.nodes[node.children[0].node_index()..][i]
-    }
+/// The child of slot `i` that the traversal descends to next. An inner child's reference is
+/// computed ([`Bvh8Node::inner_child`]: slot 0's index, loaded with the node, plus `i`) rather
+/// than loaded: the load of `children[i]`, which must wait for `i` and so for the whole box
+/// test, then only decides the branch between node and leaf, which the processor predicts, and
+/// the next node's address no longer waits for it. One L1 load less on the chain of dependent
+/// latencies that a node step is.
+// Measured (AMD EPYC Zen 4, `raypack bench SCENE --against embree --isa avx2 -t 1 --runs 5
+// --quality medium --methods Scene::intersect1,rtcIntersect1`, interleaved rounds): see
+// PERFORMANCE.md, "Inner children computed, not loaded".
+#[inline(always)]
+fn next_child(node: &Bvh8Node, i: usize) -> NodeRef {
+    let c = node.children[i];
+    if c.is_leaf() { c } else { node.inner_child(i) }
+}
 
+impl<T: TriBlock> Bvh8Ref<'_, T> {
     /// Closest-hit traversal of the subtree `start` in ISA `I` with triangle kernel `P`
     /// (which must be the kernel of `self.test`), shrinking `tfar` and updating `hit` as
     /// closer hits are found; the packet kernels' single-ray fallback enters here too.
@@ -198,86 +201,70 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
         let mut cur = start;
         loop {
             'descend: {
-                if !cur.is_leaf() {
-                    let mut node = &self.nodes[cur.node_index()];
-                    loop {
-                        counter.add(Work::Nodes, 1);
-                        let (mut mask, dist) = r.intersect_node(node, tfar);
-                        if mask == 0 {
-                            break 'descend;
-                        }
-                        let i0 = mask.trailing_zeros() as usize;
-                        mask &= mask - 1;
-                        if mask == 0 {
-                            let c = node.children[i0];
-                            if c.is_leaf() {
-                                cur = c;
-                                break;
-                            }
-                            node = self.inner_child_node(node, i0);
-                            continue;
-                        }
-                        let mut d = [0.0f32; 8];
-                        dist.store(&mut d);
-                        // Two or more children will be visited: start fetching all of them now.
-                        let mut m = mask;
-                        while m != 0 {
-                            let i = m.trailing_zeros() as usize;
-                            m &= m - 1;
-                            self.prefetch(node.children[i]);
-                        }
-                        self.prefetch(node.children[i0]);
-                        let i1 = mask.trailing_zeros() as usize;
-                        mask &= mask - 1;
-                        if mask == 0 {
-                            let (near, far) = if d[i0] <= d[i1] { (i0, i1) } else { (i1, i0) };
-                            refs[sp] = MaybeUninit::new(node.children[far]);
-                            dists[sp] = MaybeUninit::new(d[far]);
-                            sp += 1;
-                            let c = node.children[near];
-                            if c.is_leaf() {
-                                cur = c;
-                                break;
-                            }
-                            node = self.inner_child_node(node, near);
-                            continue;
-                        }
-                        // Three or more: push all, sort the pushed run by decreasing distance
-                        // (insertion sort), continue with the nearest.
-                        let base = sp;
-                        for i in [i0, i1] {
-                            refs[sp] = MaybeUninit::new(node.children[i]);
-                            dists[sp] = MaybeUninit::new(d[i]);
-                            sp += 1;
-                        }
-                        while mask != 0 {
-                            let i = mask.trailing_zeros() as usize;
-                            mask &= mask - 1;
-                            refs[sp] = MaybeUninit::new(node.children[i]);
-                            dists[sp] = MaybeUninit::new(d[i]);
-                            sp += 1;
-                        }
-                        for i in base + 1..sp {
-                            // SAFETY: entries base..sp were written just above.
-                            let (rr, dd) = unsafe { (refs[i].assume_init(), dists[i].assume_init()) };
-                            let mut j = i;
-                            // SAFETY: base <= j - 1 < sp, written above.
-                            while j > base && unsafe { dists[j - 1].assume_init() } < dd {
-                                refs[j] = refs[j - 1];
-                                dists[j] = dists[j - 1];
-                                j -= 1;
-                            }
-                            refs[j] = MaybeUninit::new(rr);
-                            dists[j] = MaybeUninit::new(dd);
-                        }
-                        sp -= 1;
-                        // SAFETY: entry sp was written above.
-                        cur = unsafe { refs[sp].assume_init() };
-                        if cur.is_leaf() {
-                            break;
-                        }
-                        node = &self.nodes[cur.node_index()];
+                while !cur.is_leaf() {
+                    let node = &self.nodes[cur.node_index()];
+                    counter.add(Work::Nodes, 1);
+                    let (mut mask, dist) = r.intersect_node(node, tfar);
+                    if mask == 0 {
+                        break 'descend;
                     }
+                    let i0 = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    if mask == 0 {
+                        cur = next_child(node, i0);
+                        continue;
+                    }
+                    let mut d = [0.0f32; 8];
+                    dist.store(&mut d);
+                    // Two or more children will be visited: start fetching all of them now.
+                    let mut m = mask;
+                    while m != 0 {
+                        let i = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        self.prefetch(node.children[i]);
+                    }
+                    self.prefetch(node.children[i0]);
+                    let i1 = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    if mask == 0 {
+                        let (near, far) = if d[i0] <= d[i1] { (i0, i1) } else { (i1, i0) };
+                        refs[sp] = MaybeUninit::new(node.children[far]);
+                        dists[sp] = MaybeUninit::new(d[far]);
+                        sp += 1;
+                        cur = next_child(node, near);
+                        continue;
+                    }
+                    // Three or more: push all, sort the pushed run by decreasing distance
+                    // (insertion sort), continue with the nearest.
+                    let base = sp;
+                    for i in [i0, i1] {
+                        refs[sp] = MaybeUninit::new(node.children[i]);
+                        dists[sp] = MaybeUninit::new(d[i]);
+                        sp += 1;
+                    }
+                    while mask != 0 {
+                        let i = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        refs[sp] = MaybeUninit::new(node.children[i]);
+                        dists[sp] = MaybeUninit::new(d[i]);
+                        sp += 1;
+                    }
+                    for i in base + 1..sp {
+                        // SAFETY: entries base..sp were written just above.
+                        let (rr, dd) = unsafe { (refs[i].assume_init(), dists[i].assume_init()) };
+                        let mut j = i;
+                        // SAFETY: base <= j - 1 < sp, written above.
+                        while j > base && unsafe { dists[j - 1].assume_init() } < dd {
+                            refs[j] = refs[j - 1];
+                            dists[j] = dists[j - 1];
+                            j -= 1;
+                        }
+                        refs[j] = MaybeUninit::new(rr);
+                        dists[j] = MaybeUninit::new(dd);
+                    }
+                    sp -= 1;
+                    // SAFETY: entry sp was written above.
+                    cur = unsafe { refs[sp].assume_init() };
                 }
                 self.intersect_leaf1::<I, P, C>(cur, r, &pre, tnear, &mut tfar, &mut hit, counter);
             }
@@ -363,28 +350,22 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
         let mut cur = start;
         loop {
             'descend: {
-                if !cur.is_leaf() {
-                    let mut node = &self.nodes[cur.node_index()];
-                    loop {
-                        counter.add(Work::Nodes, 1);
-                        let (mut mask, _) = r.intersect_node(node, r.ray.tfar);
-                        if mask == 0 {
-                            break 'descend;
-                        }
-                        let first = mask.trailing_zeros() as usize;
-                        mask &= mask - 1;
-                        while mask != 0 {
-                            let i = mask.trailing_zeros() as usize;
-                            mask &= mask - 1;
-                            stack[sp] = MaybeUninit::new(node.children[i]);
-                            sp += 1;
-                        }
-                        cur = node.children[first];
-                        if cur.is_leaf() {
-                            break;
-                        }
-                        node = self.inner_child_node(node, first);
+                while !cur.is_leaf() {
+                    let node = &self.nodes[cur.node_index()];
+                    counter.add(Work::Nodes, 1);
+                    let (mut mask, _) = r.intersect_node(node, r.ray.tfar);
+                    if mask == 0 {
+                        break 'descend;
                     }
+                    let first = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    while mask != 0 {
+                        let i = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        stack[sp] = MaybeUninit::new(node.children[i]);
+                        sp += 1;
+                    }
+                    cur = next_child(node, first);
                 }
                 let range = cur.blocks();
                 counter.add(Work::Leaves, 1);
