@@ -387,17 +387,11 @@ impl<'a, S: Fn(u32) -> PrimShape + Sync> Emitter<'a, S> {
             }
             CollapseMethod::Greedy => greedy_forest(self.p, n, &mut kids),
         }
-        // Inner roots first, each group in forest order: the layout invariant of `Bvh8Node`
-        // (slot `i < k` holds node `first + i`).
-        let mut ordered = Kids::default();
-        for leaves in [false, true] {
-            for &c in kids.as_slice() {
-                if self.is_leaf_root(c) == leaves {
-                    ordered.push(c);
-                }
-            }
-        }
-        ordered
+        // Inner roots first, each group in forest order (a stable sort): the layout invariant
+        // of `Bvh8Node` (slot `i < k` holds node `first + i`).
+        let len = kids.len;
+        kids.n[..len].sort_by_key(|&c| self.is_leaf_root(c));
+        kids
     }
 
     /// The triangle leaf roots among `kids` that share blocks: those of at most `m`
