@@ -281,7 +281,8 @@ unsafe fn run_avx512<O: IsaOp>(op: O) -> O::Output {
 mod tests {
     use super::*;
 
-    /// The lane checks of `simd::check_lanes` on every tier the CPU has.
+    /// The lane checks of `simd::check_lanes` and `simd::check_transpose8` on every tier the CPU
+    /// has.
     struct CheckLanes;
     impl IsaOp for CheckLanes {
         type Output = Isa;
@@ -290,6 +291,7 @@ mod tests {
             crate::simd::check_lanes::<I::F4>();
             crate::simd::check_lanes::<I::F8>();
             crate::simd::check_lanes::<I::F16>();
+            crate::simd::check_transpose8::<I::F8>();
             I::ISA
         }
     }

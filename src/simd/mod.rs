@@ -141,9 +141,18 @@ pub trait Transpose8: Lanes {
 }
 
 impl Transpose8 for F32x8 {
+    /// Four 4 × 4 transposes of the rows' halves (`wide`'s `f32x4::transpose`, SSE shuffles).
+    /// `wide`'s own `f32x8::transpose` moves lane by lane through memory when AVX is not
+    /// enabled at compile time, as in this baseline tier, and made `RayPacket16::from_rays`
+    /// as slow as tracing the packet's camera rays (PERFORMANCE.md, "Packets from rays").
     #[inline(always)]
     fn transpose8(rows: [Self; 8]) -> [Self; 8] {
-        F32x8::transpose(rows)
+        let halves: [[F32x4; 2]; 8] = rows.map(bytemuck::cast);
+        let block = |bi: usize, bj: usize| F32x4::transpose(std::array::from_fn(|k| halves[4 * bi + k][bj]));
+        // Block (bi, bj) holds lanes 4 bj .. 4 bj + 4 of rows 4 bi .. 4 bi + 4; transposed,
+        // lanes 4 bi .. 4 bi + 4 of rows 4 bj .. 4 bj + 4.
+        let t = [[block(0, 0), block(0, 1)], [block(1, 0), block(1, 1)]];
+        std::array::from_fn(|j| bytemuck::cast([t[0][j / 4][j % 4], t[1][j / 4][j % 4]]))
     }
 }
 
@@ -266,6 +275,18 @@ pub fn bits(mut mask: u32) -> impl Iterator<Item = usize> {
     })
 }
 
+/// `V::transpose8` checked on a matrix of distinct values (the unit tests of every ISA's
+/// lanes call this).
+#[cfg(test)]
+pub(crate) fn check_transpose8<V: Transpose8>() {
+    let rows: [V; 8] = std::array::from_fn(|i| V::load(&std::array::from_fn::<f32, 8, _>(|j| (8 * i + j) as f32)));
+    for (j, column) in V::transpose8(rows).iter().enumerate() {
+        for i in 0..8 {
+            assert_eq!(column.lane(i), (8 * i + j) as f32, "row {j}, lane {i} of the transpose");
+        }
+    }
+}
+
 /// The lane operations checked on one lane type against scalar arithmetic (the unit tests of
 /// every ISA's lanes call this).
 #[cfg(test)]
@@ -352,6 +373,7 @@ mod tests {
         check_lanes::<F32x4>();
         check_lanes::<F32x8>();
         check_lanes::<F32x16>();
+        check_transpose8::<F32x8>();
         assert_eq!(bits(0b1010_0001).collect::<Vec<_>>(), vec![0, 5, 7]);
     }
 }
