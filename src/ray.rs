@@ -90,6 +90,18 @@ pub fn transpose_rays_in<V: crate::simd::Transpose8>(rays: &[Ray]) -> [[f32; 16]
     if n == 16 {
         return transpose16::<V>(rays[..16].try_into().expect("16 rays"));
     }
+    if n == 8 {
+        // An 8-ray packet: one transpose, the other half the first ray broadcast.
+        let rays: &[Ray; 8] = rays[..8].try_into().expect("8 rays");
+        let lo = V::transpose8(std::array::from_fn(|i| V::load(&rays[i].to_array())));
+        let a = rays[0].to_array();
+        let mut rows = [[0.0f32; 16]; 8];
+        for (k, (out, l)) in rows.iter_mut().zip(lo).enumerate() {
+            l.store(&mut out[..8]);
+            V::splat(a[k]).store(&mut out[8..]);
+        }
+        return rows;
+    }
     let mut full = [rays.first().copied().unwrap_or(Ray::new(Vec3::ZERO, Vec3::X)); 16];
     full[..n].copy_from_slice(&rays[..n]);
     transpose16::<V>(&full)
