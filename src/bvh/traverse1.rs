@@ -59,17 +59,8 @@ impl<V: Lanes> Ray1<V> {
     /// Precomputes the slab-test constants of `ray` (which must be valid).
     #[inline(always)]
     pub fn new(ray: &Ray) -> Self {
-        Self::with_inv(ray, ray.inv_dir())
-    }
-
-    /// [`Ray1::new`] with the ray's reciprocal direction given, which must be [`Ray::inv_dir`]
-    /// bit for bit: a packet's lanes hold it (the single-ray fallback of the packet kernels
-    /// then divides nothing; a debug assertion checks, and so does a test in
-    /// `traverse_packet`).
-    #[inline(always)]
-    pub fn with_inv(ray: &Ray, inv: crate::math::Vec3) -> Self {
         debug_assert_eq!(V::LANES, 8, "one lane per child slot");
-        debug_assert!(inv.to_array().map(f32::to_bits) == ray.inv_dir().to_array().map(f32::to_bits));
+        let inv = ray.inv_dir();
         // `+ 0.0` turns a `tnear` of `-0.0` into `+0.0` (see `intersect_node`), in the ray
         // itself so that the node and the triangle tests share one value.
         let ray = Ray { tnear: ray.tnear + 0.0, ..*ray };

@@ -361,8 +361,7 @@ pub fn intersect_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C
                     let r = rays.ray(i);
                     let mut tfar = r.tfar;
                     let mut hit = Hit::MISS;
-                    let r1 = Ray1::with_inv(&r, rays.inv.lane(i));
-                    bvh.intersect1_from::<I, P, C>(&r1, cur, &mut tfar, &mut hit, counter);
+                    bvh.intersect1_from::<I, P, C>(&Ray1::new(&r), cur, &mut tfar, &mut hit, counter);
                     if hit.is_hit() {
                         rays.set_lane(i, &hit);
                     }
@@ -540,7 +539,7 @@ pub fn occluded_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C:
             if active.count_ones() as usize <= threshold {
                 counter.add(Work::FallbackRays, active.count_ones());
                 for i in crate::simd::bits(active) {
-                    if bvh.occluded1_from::<I, P, C>(&Ray1::with_inv(&rays.ray(i), rays.inv.lane(i)), cur, counter) {
+                    if bvh.occluded1_from::<I, P, C>(&Ray1::new(&rays.ray(i)), cur, counter) {
                         occluded |= 1 << i;
                     }
                 }
@@ -623,58 +622,6 @@ pub fn occluded_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C:
                 active = m;
                 break;
             }
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::math::Vec3;
-    use crate::simd::isa::{IsaOp, dispatch};
-
-    /// The packets' reciprocals against `Ray::inv_dir`, bit for bit, on both packet widths of
-    /// an ISA tier: the single-ray fallback builds its [`Ray1`] from them ([`Ray1::with_inv`]).
-    struct ReciprocalsMatchScalar;
-    impl IsaOp for ReciprocalsMatchScalar {
-        type Output = usize;
-        #[inline(always)]
-        fn run<I: IsaLanes>(self) -> usize {
-            let special = [0.0, -0.0, 1e-18, -1e-18, 0.99e-18, -1.01e-18, 1e-30, f32::MIN_POSITIVE / 4.0, 3.0, -7.5e20];
-            let mut rng = crate::render::sampler::Rng::new(3, 4);
-            let rays: Vec<Ray> = (0..64)
-                .map(|k| {
-                    let mut c = |a: usize| {
-                        if (k + a).is_multiple_of(3) {
-                            special[(k * 7 + a) % special.len()]
-                        } else {
-                            rng.next_f32() * 2.0 - 1.0
-                        }
-                    };
-                    Ray::segment(Vec3::ZERO, Vec3::new(c(0), c(1), c(2)), 0.0, 1.0)
-                })
-                .collect();
-            let mut checked = 0;
-            for chunk in rays.chunks(16) {
-                let p16 = PacketRays::<I::Stream>::new_in::<I::F8>(chunk, u32::MAX);
-                let p8 = PacketRays::<I::F8>::new_in::<I::F8>(&chunk[..8], u32::MAX);
-                for (i, ray) in chunk.iter().enumerate() {
-                    let want = ray.inv_dir().to_array().map(f32::to_bits);
-                    assert_eq!(p16.inv.lane(i).to_array().map(f32::to_bits), want, "{}: {ray:?}", I::ISA);
-                    if i < 8 {
-                        assert_eq!(p8.inv.lane(i).to_array().map(f32::to_bits), want, "{}: {ray:?}", I::ISA);
-                    }
-                    checked += 1;
-                }
-            }
-            checked
-        }
-    }
-
-    #[test]
-    fn packet_reciprocals_match_scalar_on_every_isa() {
-        for isa in crate::simd::Isa::available() {
-            assert_eq!(dispatch(isa, ReciprocalsMatchScalar), 64, "{isa}");
         }
     }
 }
