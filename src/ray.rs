@@ -77,7 +77,7 @@ impl Ray {
 const _: () = assert!(std::mem::size_of::<Ray>() == 32 && std::mem::align_of::<Ray>() == 4);
 
 /// The rows `origin.x, origin.y, origin.z, dir.x, dir.y, dir.z, tnear, tfar` of up to 16
-/// rays (lanes past `rays.len()` repeat the first ray), by two 8 x 8 transposes.
+/// rays (lanes past `rays.len()` repeat the first ray), by 8 x 8 transposes (one for 8 rays).
 #[inline]
 pub fn transpose_rays(rays: &[Ray]) -> [[f32; 16]; 8] {
     transpose_rays_in::<crate::simd::F32x8>(rays)
