@@ -122,17 +122,19 @@ pub fn output_for(run: &Run<'_>, n: usize) -> Output {
 }
 
 /// Traces `rays` with `run` into `out` on the current rayon pool, in contiguous chunks of
-/// [`CHUNK`] rays.
+/// [`CHUNK`] rays, each chunk a rayon task of its own (as [`Scene::intersect_stream`] does:
+/// with rayon's default split, a thread's last large task could leave the other idle, which
+/// cost two threads up to 19% on diffuse rays; PERFORMANCE.md, "Work split over threads").
 ///
 /// # Panics
 /// When `out` is of the other query kind or shorter than `rays`.
 pub fn trace(run: &Run<'_>, rays: &[Ray], out: &mut Output) {
     match (run, out) {
         (Run::Intersect(f), Output::Hits(h)) => {
-            rays.par_chunks(CHUNK).zip(h.par_chunks_mut(CHUNK)).for_each(|(r, h)| f(r, h))
+            rays.par_chunks(CHUNK).zip(h.par_chunks_mut(CHUNK)).with_max_len(1).for_each(|(r, h)| f(r, h))
         }
         (Run::Occluded(f), Output::Occluded(o)) => {
-            rays.par_chunks(CHUNK).zip(o.par_chunks_mut(CHUNK)).for_each(|(r, o)| f(r, o))
+            rays.par_chunks(CHUNK).zip(o.par_chunks_mut(CHUNK)).with_max_len(1).for_each(|(r, o)| f(r, o))
         }
         _ => panic!("output buffer does not match the query"),
     }

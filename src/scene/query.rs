@@ -17,7 +17,10 @@ use crate::ray::{Hit, Ray, RayPacket8, RayPacket16};
 use crate::scene::Scene;
 use rayon::prelude::*;
 
-/// Rays per rayon task of the stream queries (64 packets of 16).
+/// Rays per rayon task of the stream queries (64 packets of 16). Every chunk is a task of
+/// its own (`with_max_len(1)`): rayon's default split stops at about two tasks per thread
+/// and does not split a task once it runs, so a thread could finish its share of a batch and
+/// wait for the other's last large task (PERFORMANCE.md, "Work split over threads").
 const STREAM_CHUNK: usize = 1024;
 
 macro_rules! packet_queries {
@@ -99,6 +102,7 @@ impl Scene {
         assert_eq!(rays.len(), hits.len(), "one hit per ray");
         rays.par_chunks(STREAM_CHUNK)
             .zip(hits.par_chunks_mut(STREAM_CHUNK))
+            .with_max_len(1)
             .for_each(|(r, h)| self.intersect_batch(r, h));
     }
 
@@ -158,6 +162,7 @@ impl Scene {
         assert_eq!(rays.len(), occluded.len(), "one answer per ray");
         rays.par_chunks(STREAM_CHUNK)
             .zip(occluded.par_chunks_mut(STREAM_CHUNK))
+            .with_max_len(1)
             .for_each(|(r, o)| self.occluded_batch(r, o));
     }
 
