@@ -1,7 +1,8 @@
 //! The renderer: tile-parallel image formation over a committed [`Scene`].
 //!
 //! Pixels are split into square tiles rendered by rayon tasks, each worker with its own
-//! buffers and counters (no locks, no allocation per sample). A tile is rendered in passes:
+//! buffers and counters (no allocation per sample; a worker's buffers sit behind a lock that
+//! only it takes). A tile is rendered in passes:
 //! each pass generates a batch of camera rays for the pixels still sampling and traces their
 //! paths together, one bounce at a time, every kind of ray in one stream through the packet
 //! kernels ([`wavefront`]). Pixels none of whose camera rays can hit the scene are found first,
@@ -40,6 +41,7 @@ use crate::scene::{Camera, Scene};
 use adaptive::PixelEstimate;
 use sampler::Rng;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Mutex, TryLockError};
 use std::time::{Duration, Instant};
 
 /// Edge length of a render tile in pixels.
@@ -164,10 +166,12 @@ pub fn render(
     let integrator = integrator::Integrator::new(scene, settings);
     let camera = camera::CameraRays::new(camera);
     let order = settings.stream_order.unwrap_or_else(|| StreamOrder::default_for(scene.isa()));
+    let wavefronts = Wavefronts::for_pool();
     let rendered: Vec<TileResult> = tiles
         .par_iter()
-        .map_init(wavefront::Wavefront::new, |wf, &(tx, ty)| {
-            let r = render_tile(&integrator, &camera, settings, order, wf, tx, ty);
+        .with_max_len(1)
+        .map(|&(tx, ty)| {
+            let r = wavefronts.with(|wf| render_tile(&integrator, &camera, settings, order, wf, tx, ty));
             progress(done.fetch_add(1, Ordering::Relaxed) + 1);
             r
         })
@@ -195,6 +199,34 @@ pub fn render(
     stats.sampled_rays = log.sampled;
     stats.time = start.elapsed();
     RenderOutput { film, samples_per_pixel: spp, stats }
+}
+
+/// One wavefront per thread of the rayon pool, reused from tile to tile. Every tile is a rayon
+/// task of its own (`with_max_len(1)`): with rayon's default split (about two tasks per
+/// thread, a running task never split again) a thread could finish and wait for the other's
+/// last run of tiles; a new wavefront per task, instead of one per thread, cost the Cornell
+/// box's cheap tiles 4% (PERFORMANCE.md, "Work split over threads").
+struct Wavefronts(Vec<Mutex<wavefront::Wavefront>>);
+
+impl Wavefronts {
+    /// One (empty) wavefront per thread of the current pool.
+    fn for_pool() -> Self {
+        Self((0..rayon::current_num_threads()).map(|_| Mutex::default()).collect())
+    }
+
+    /// Runs `f` with the calling thread's wavefront. Only thread `i` takes wavefront `i`, so
+    /// it is free unless a tile started inside another on the same thread (nothing in a tile
+    /// waits on rayon today); such a tile gets a wavefront of its own rather than waiting.
+    fn with<R>(&self, f: impl FnOnce(&mut wavefront::Wavefront) -> R) -> R {
+        let i = rayon::current_thread_index().unwrap_or(0) % self.0.len();
+        match self.0[i].try_lock() {
+            Ok(mut wf) => f(&mut wf),
+            // A tile panicked with it: the render ends in that panic once the other tiles
+            // are done, so what they compute with the wavefront it left is thrown away.
+            Err(TryLockError::Poisoned(e)) => f(&mut e.into_inner()),
+            Err(TryLockError::WouldBlock) => f(&mut wavefront::Wavefront::new()),
+        }
+    }
 }
 
 struct TileResult {
