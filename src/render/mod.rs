@@ -1,11 +1,10 @@
 //! The renderer: tile-parallel image formation over a committed [`Scene`].
 //!
-//! Pixels are split into square tiles rendered by rayon tasks, each worker with its own
+//! Pixels are split into square tiles, one rayon task each; every worker keeps its own
 //! buffers and counters (no allocation per sample; a worker's buffers sit behind a lock that
-//! only it takes). A tile is rendered in passes:
-//! each pass generates a batch of camera rays for the pixels still sampling and traces their
-//! paths together, one bounce at a time, every kind of ray in one stream through the packet
-//! kernels ([`wavefront`]). Pixels none of whose camera rays can hit the scene are found first,
+//! only it takes). A tile is rendered in passes: each pass generates a batch of camera rays
+//! for the pixels still sampling and traces their paths together, one bounce at a time, every
+//! kind of ray in one stream through the packet kernels ([`wavefront`]). Pixels none of whose camera rays can hit the scene are found first,
 //! by cones of rays over rectangles of pixels ([`crate::Scene::cone_may_hit`]), and take the
 //! value of a miss without tracing. Each sample `s` of pixel `p` draws its random numbers from its own
 //! generator seeded by `(seed, p, s)`, so the image is a pure function of the scene, the
@@ -221,8 +220,8 @@ impl Wavefronts {
         let i = rayon::current_thread_index().unwrap_or(0) % self.0.len();
         match self.0[i].try_lock() {
             Ok(mut wf) => f(&mut wf),
-            // A tile panicked with it: the render ends in that panic once the other tiles
-            // are done, so what they compute with the wavefront it left is thrown away.
+            // A tile panicked holding it: rayon ends the render in that panic, so whatever
+            // later tiles compute with the wavefront it left is thrown away.
             Err(TryLockError::Poisoned(e)) => f(&mut e.into_inner()),
             Err(TryLockError::WouldBlock) => f(&mut wavefront::Wavefront::new()),
         }
