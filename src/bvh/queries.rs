@@ -63,7 +63,7 @@ impl<T: TriBlock, C: Counter> IsaOp for Intersect1<'_, T, C> {
         let mut hit = Hit::MISS;
         if self.ray.is_valid() {
             let (bvh, r, mut tfar) = (self.bvh.slices(), Ray1::<I::F8>::new(self.ray), self.ray.tfar);
-            with_kernel!(bvh.test, P => bvh.intersect1_from::<I, P, C>(&r, bvh.root(), &mut tfar, &mut hit, self.counter));
+            with_kernel!(bvh.test, P => bvh.intersect1_from::<I, P, C, true>(&r, bvh.root(), &mut tfar, &mut hit, self.counter));
         }
         hit
     }
@@ -81,7 +81,7 @@ impl<T: TriBlock, C: Counter> IsaOp for Occluded1<'_, T, C> {
     fn run<I: IsaLanes>(self) -> bool {
         self.ray.is_valid() && {
             let (bvh, r) = (self.bvh.slices(), Ray1::<I::F8>::new(self.ray));
-            with_kernel!(bvh.test, P => bvh.occluded1_from::<I, P, C>(&r, bvh.root(), self.counter))
+            with_kernel!(bvh.test, P => bvh.occluded1_from::<I, P, C, true>(&r, bvh.root(), self.counter))
         }
     }
 }

@@ -234,13 +234,26 @@ fn speculated_slot(i: usize) -> usize {
     i
 }
 
+/// The slot to descend to: through [`speculated_slot`]'s predicted branches when
+/// `SPECULATE`, else `i` as it is.
+#[inline(always)]
+fn descent_slot<const SPECULATE: bool>(i: usize) -> usize {
+    if SPECULATE { speculated_slot(i) } else { i }
+}
+
 impl<T: TriBlock> Bvh8Ref<'_, T> {
     /// Closest-hit traversal of the subtree `start` in ISA `I` with triangle kernel `P`
     /// (which must be the kernel of `self.test`), shrinking `tfar` and updating `hit` as
     /// closer hits are found; the packet kernels' single-ray fallback enters here too.
     /// Sphere hits carry `u = v = 0`; the scene fills in their surface coordinates.
+    ///
+    /// `SPECULATE` takes each descent's slot through predicted branches (`speculated_slot`).
+    /// The single-ray queries set it; the packet kernels' fallback does not: its rays enter
+    /// subtrees part-way down, one after the other, where the branch history does not tell
+    /// the slot, and the streams were 2-3% slower with it (PERFORMANCE.md, "Descent slots as
+    /// predicted branches").
     #[inline(always)]
-    pub fn intersect1_from<I: IsaLanes, P: TriangleKernel, C: Counter>(
+    pub fn intersect1_from<I: IsaLanes, P: TriangleKernel, C: Counter, const SPECULATE: bool>(
         &self,
         r: &Ray1<I::F8>,
         start: NodeRef,
@@ -269,7 +282,7 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                     let i0 = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
                     if mask == 0 {
-                        cur = next_child(node, speculated_slot(i0));
+                        cur = next_child(node, descent_slot::<SPECULATE>(i0));
                         continue;
                     }
                     let mut d = [0.0f32; 8];
@@ -289,7 +302,7 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                         refs[sp] = MaybeUninit::new(node.children[far]);
                         dists[sp] = MaybeUninit::new(d[far]);
                         sp += 1;
-                        cur = next_child(node, speculated_slot(near));
+                        cur = next_child(node, descent_slot::<SPECULATE>(near));
                         continue;
                     }
                     // Three or more: continue with the nearest (of equal distances the last
@@ -328,7 +341,7 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                         refs[j] = MaybeUninit::new(rr);
                         dists[j] = MaybeUninit::new(dd);
                     }
-                    cur = next_child(node, speculated_slot(near));
+                    cur = next_child(node, descent_slot::<SPECULATE>(near));
                 }
                 self.intersect_leaf1::<I, P, C>(cur, r, &pre, tnear, &mut tfar, &mut hit, counter);
             }
@@ -398,9 +411,10 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
 
     /// Any-hit traversal of the subtree `start` in ISA `I` with triangle kernel `P` (which
     /// must be the kernel of `self.test`). Children are visited in slot order (no sorting):
-    /// an occluder anywhere ends the query, so ordering buys little.
+    /// an occluder anywhere ends the query, so ordering buys little. `SPECULATE` as for
+    /// [`Bvh8Ref::intersect1_from`].
     #[inline(always)]
-    pub fn occluded1_from<I: IsaLanes, P: TriangleKernel, C: Counter>(
+    pub fn occluded1_from<I: IsaLanes, P: TriangleKernel, C: Counter, const SPECULATE: bool>(
         &self,
         r: &Ray1<I::F8>,
         start: NodeRef,
@@ -429,7 +443,7 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                         stack[sp] = MaybeUninit::new(node.children[i]);
                         sp += 1;
                     }
-                    cur = next_child(node, speculated_slot(first));
+                    cur = next_child(node, descent_slot::<SPECULATE>(first));
                 }
                 let range = cur.blocks();
                 counter.add(Work::Leaves, 1);

@@ -361,7 +361,7 @@ pub fn intersect_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C
                     let r = rays.ray(i);
                     let mut tfar = r.tfar;
                     let mut hit = Hit::MISS;
-                    bvh.intersect1_from::<I, P, C>(&Ray1::new(&r), cur, &mut tfar, &mut hit, counter);
+                    bvh.intersect1_from::<I, P, C, false>(&Ray1::new(&r), cur, &mut tfar, &mut hit, counter);
                     if hit.is_hit() {
                         rays.set_lane(i, &hit);
                     }
@@ -539,7 +539,7 @@ pub fn occluded_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C:
             if active.count_ones() as usize <= threshold {
                 counter.add(Work::FallbackRays, active.count_ones());
                 for i in crate::simd::bits(active) {
-                    if bvh.occluded1_from::<I, P, C>(&Ray1::new(&rays.ray(i)), cur, counter) {
+                    if bvh.occluded1_from::<I, P, C, false>(&Ray1::new(&rays.ray(i)), cur, counter) {
                         occluded |= 1 << i;
                     }
                 }
