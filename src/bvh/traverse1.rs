@@ -237,8 +237,8 @@ fn speculated_slot(i: usize) -> usize {
 /// The slot to descend to: through [`speculated_slot`]'s predicted branches when
 /// `SPECULATE`, else `i` as it is.
 #[inline(always)]
-fn descent_slot<const SPECULATE: bool>(i: usize) -> usize {
-    if SPECULATE { speculated_slot(i) } else { i }
+fn descent_slot<I: IsaLanes, const SPECULATE: bool>(i: usize) -> usize {
+    if SPECULATE && I::SPECULATE_DESCENT { speculated_slot(i) } else { i }
 }
 
 impl<T: TriBlock> Bvh8Ref<'_, T> {
@@ -282,7 +282,7 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                     let i0 = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
                     if mask == 0 {
-                        cur = next_child(node, descent_slot::<SPECULATE>(i0));
+                        cur = next_child(node, descent_slot::<I, SPECULATE>(i0));
                         continue;
                     }
                     let mut d = [0.0f32; 8];
@@ -302,7 +302,7 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                         refs[sp] = MaybeUninit::new(node.children[far]);
                         dists[sp] = MaybeUninit::new(d[far]);
                         sp += 1;
-                        cur = next_child(node, descent_slot::<SPECULATE>(near));
+                        cur = next_child(node, descent_slot::<I, SPECULATE>(near));
                         continue;
                     }
                     // Three or more: continue with the nearest (of equal distances the last
@@ -341,7 +341,7 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                         refs[j] = MaybeUninit::new(rr);
                         dists[j] = MaybeUninit::new(dd);
                     }
-                    cur = next_child(node, descent_slot::<SPECULATE>(near));
+                    cur = next_child(node, descent_slot::<I, SPECULATE>(near));
                 }
                 self.intersect_leaf1::<I, P, C>(cur, r, &pre, tnear, &mut tfar, &mut hit, counter);
             }
@@ -443,7 +443,7 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                         stack[sp] = MaybeUninit::new(node.children[i]);
                         sp += 1;
                     }
-                    cur = next_child(node, descent_slot::<SPECULATE>(first));
+                    cur = next_child(node, descent_slot::<I, SPECULATE>(first));
                 }
                 let range = cur.blocks();
                 counter.add(Work::Leaves, 1);

@@ -171,6 +171,9 @@ pub trait IsaLanes: Copy + Send + Sync + 'static {
     /// subtree when they finish it one by one
     /// ([`crate::bvh::traverse_packet::incoherent_threshold`]).
     const INCOHERENT_THRESHOLD_16: usize;
+    /// Whether the single-ray kernels take the slot they descend to through predicted
+    /// branches ([`crate::bvh::traverse1`]).
+    const SPECULATE_DESCENT: bool;
 }
 
 /// The baseline tier's lanes (`wide`'s types). Also usable directly: it needs no CPU check.
@@ -184,6 +187,7 @@ impl IsaLanes for Baseline {
     type F16 = F32x16;
     type Stream = F32x16;
     const INCOHERENT_THRESHOLD_16: usize = 6;
+    const SPECULATE_DESCENT: bool = false;
 }
 
 /// The AVX2 tier's lanes.
@@ -199,6 +203,7 @@ impl IsaLanes for Avx2 {
     type F16 = super::x86::Pair<super::x86::M256>;
     type Stream = super::x86::Pair<super::x86::M256>;
     const INCOHERENT_THRESHOLD_16: usize = 6;
+    const SPECULATE_DESCENT: bool = true;
 }
 
 /// The AVX-512 tier's lanes.
@@ -216,6 +221,7 @@ impl IsaLanes for Avx512 {
     // 4 against 6: diffuse streams 1-4% faster on all four scenes measured, AVX2 no
     // better with 4 (PERFORMANCE.md, "Streams").
     const INCOHERENT_THRESHOLD_16: usize = 4;
+    const SPECULATE_DESCENT: bool = true;
 }
 
 /// A kernel invocation, run with the lanes of one ISA tier. `run` and everything it calls
