@@ -9,9 +9,9 @@
 //! per-lane min/max of the two planes. Hit children are visited nearest first: with one hit
 //! child the traversal just descends, with two it compares, with more it descends to the
 //! nearest and pushes the others sorted by distance (popped entries farther than the closest
-//! hit so far are skipped). The slot a step descends to is chosen through predicted branches
-//! (`speculated_slot`), so that the child's loads need not wait for the box test that picks
-//! it.
+//! hit so far are skipped). On the AVX2 and AVX-512 tiers the slot a step descends to is
+//! chosen through predicted branches (`speculated_slot`), so that the child's loads need not
+//! wait for the box test that picks it.
 //!
 // Measured against visiting hit children in slot order (no sorting; 1 thread, best of 9,
 // Mrays/s, Embree's `rtcIntersect1` in the same process for scale): on the Stanford dragon
@@ -234,8 +234,9 @@ fn speculated_slot(i: usize) -> usize {
     i
 }
 
-/// The slot to descend to: through [`speculated_slot`]'s predicted branches when
-/// `SPECULATE`, else `i` as it is.
+/// The slot to descend to: through [`speculated_slot`]'s predicted branches when the caller
+/// asks for it (`SPECULATE`) and the tier takes it ([`IsaLanes::SPECULATE_DESCENT`]: not the
+/// baseline tier), else `i` as it is.
 #[inline(always)]
 fn descent_slot<I: IsaLanes, const SPECULATE: bool>(i: usize) -> usize {
     if SPECULATE && I::SPECULATE_DESCENT { speculated_slot(i) } else { i }
