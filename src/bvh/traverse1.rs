@@ -180,13 +180,13 @@ fn next_child(node: &Bvh8Node, i: usize) -> NodeRef {
 
 /// Slot `i` (below 8) as the outcome of branches: three branches on `i`'s bits lead to code
 /// that sets the slot as a constant, so the result depends on the branches, which the
-/// processor predicts, and not on `i`'s data. A node step is one chain of dependent latencies (the node's rows,
-/// the slab test, the hit mask, its lowest bit, the child's address, the child's rows);
-/// with the descent's slot coming from here, a correctly predicted step starts loading the
-/// child as soon as the node's slot-0 reference is in, while the box test that decides it
-/// is still running, and a mispredicted one costs what the chain did plus the pipeline
-/// flush. The branch history of the descent so far (which slots were taken above) is what
-/// lets the predictor guess the slot.
+/// processor predicts, and not on `i`'s data. A node step is one chain of dependent
+/// latencies (the node's rows, the slab test, the hit mask, its lowest bit, the child's
+/// address, the child's rows); with the descent's slot coming from here, a correctly
+/// predicted step starts loading the child as soon as the node's slot-0 reference is in,
+/// while the box test that decides it is still running, and a mispredicted one costs what
+/// the chain did plus the pipeline flush. The branch history of the descent so far (which
+/// slots were taken above) is what lets the predictor guess the slot.
 ///
 /// The constants are written by `asm!` because LLVM would otherwise fold the branches back
 /// into `i`, which is the data dependency again. (A `match` on `i` became a jump table: one
