@@ -4,11 +4,12 @@
 //! buffers and counters (no allocation per sample; a worker's buffers sit behind a lock that
 //! only it takes). A tile is rendered in passes: each pass generates a batch of camera rays
 //! for the pixels still sampling and traces their paths together, one bounce at a time, every
-//! kind of ray in one stream through the packet kernels ([`wavefront`]). Pixels none of whose camera rays can hit the scene are found first,
-//! by cones of rays over rectangles of pixels ([`crate::Scene::cone_may_hit`]), and take the
-//! value of a miss without tracing. Each sample `s` of pixel `p` draws its random numbers from its own
-//! generator seeded by `(seed, p, s)`, so the image is a pure function of the scene, the
-//! settings and the seed, whatever the thread count.
+//! kind of ray in one stream through the packet kernels ([`wavefront`]). Pixels none of whose
+//! camera rays can hit the scene are found first, by cones of rays over rectangles of pixels
+//! ([`crate::Scene::cone_may_hit`]), and take the value of a miss without tracing. Each sample
+//! `s` of pixel `p` draws its random numbers from its own generator seeded by `(seed, p, s)`,
+//! so the image is a pure function of the scene, the settings and the seed, whatever the
+//! thread count.
 
 pub mod adaptive;
 pub mod bsdf;
