@@ -11,7 +11,8 @@
 //! nearest and pushes the others sorted by distance (popped entries farther than the closest
 //! hit so far are skipped). On the AVX2 and AVX-512 tiers the slot a step descends to is
 //! chosen through predicted branches (`speculated_slot`), so that the child's loads need not
-//! wait for the box test that picks it.
+//! wait for the box test that picks it. The any-hit kernel does not sort: it visits hit
+//! children from the highest slot down, which tests a node's leaves before its subtrees.
 //!
 // Measured against visiting hit children in slot order (no sorting; 1 thread, best of 9,
 // Mrays/s, Embree's `rtcIntersect1` in the same process for scale): on the Stanford dragon
@@ -20,6 +21,10 @@
 // 23.6 against 24.3. The static per-octant child order of Fuetterling et al. (no sorting at
 // run time, an order table per node) was not tried: the 256-byte node has no room for the
 // tables without narrowing the child references.
+//
+// The any-hit kernel's order (leaves first, from the highest slot down) against the lowest
+// slot first (inner subtrees first), nearest first and farthest first: PERFORMANCE.md, "Any
+// hit: leaves first".
 //
 //! Leaves are runs of SoA blocks tested one ray against all M triangles at once
 //! ([`crate::geometry::tri_block`]) with the BVH's [`TriangleKernel`] `P` (Möller–Trumbore
@@ -411,8 +416,11 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
     }
 
     /// Any-hit traversal of the subtree `start` in ISA `I` with triangle kernel `P` (which
-    /// must be the kernel of `self.test`). Children are visited in slot order (no sorting):
-    /// an occluder anywhere ends the query, so ordering buys little. `SPECULATE` as for
+    /// must be the kernel of `self.test`). Hit children are visited from the highest slot
+    /// down, without sorting: a node's leaves sit after its inner children
+    /// ([`Bvh8Node`]), so its leaves are tested before the traversal descends into its
+    /// subtrees, as the packet kernel does (`traverse_packet::LEAVES_FIRST`): one block test
+    /// each, and a leaf that high in the tree is a likely occluder. `SPECULATE` as for
     /// [`Bvh8Ref::intersect1_from`].
     #[inline(always)]
     pub fn occluded1_from<I: IsaLanes, P: TriangleKernel, C: Counter, const SPECULATE: bool>(
@@ -436,8 +444,10 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                     if mask == 0 {
                         break 'descend;
                     }
-                    let first = mask.trailing_zeros() as usize;
-                    mask &= mask - 1;
+                    // The highest slot now; the others pushed from the lowest up, so that
+                    // they pop from the highest down.
+                    let first = 31 - mask.leading_zeros() as usize;
+                    mask &= !(1 << first);
                     while mask != 0 {
                         let i = mask.trailing_zeros() as usize;
                         mask &= mask - 1;
