@@ -419,9 +419,9 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
     /// must be the kernel of `self.test`). Hit children are visited from the highest slot
     /// down, without sorting: a node's leaves sit after its inner children
     /// ([`Bvh8Node`]), so its leaves are tested before the traversal descends into its
-    /// subtrees, as the packet kernel does (`traverse_packet::LEAVES_FIRST`): one block test
-    /// each, and a leaf that high in the tree is a likely occluder. `SPECULATE` as for
-    /// [`Bvh8Ref::intersect1_from`].
+    /// subtrees, as the packet kernel does (`traverse_packet::LEAVES_FIRST`): a leaf costs a
+    /// block test where a subtree costs a walk, and an occluder found there ends the query.
+    /// `SPECULATE` as for [`Bvh8Ref::intersect1_from`].
     #[inline(always)]
     pub fn occluded1_from<I: IsaLanes, P: TriangleKernel, C: Counter, const SPECULATE: bool>(
         &self,
