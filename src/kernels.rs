@@ -157,6 +157,14 @@ fn intersect_stream(scene: &Scene, rays: &[Ray], hits: &mut [Hit]) {
     scene.intersect_batch(rays, hits);
 }
 
+fn intersect_interleaved(scene: &Scene, rays: &[Ray], hits: &mut [Hit]) {
+    scene.intersect_interleaved(rays, hits);
+}
+
+fn occluded_interleaved(scene: &Scene, rays: &[Ray], out: &mut [bool]) {
+    scene.occluded_interleaved(rays, out);
+}
+
 fn occluded_stream(scene: &Scene, rays: &[Ray], out: &mut [bool]) {
     scene.occluded_batch(rays, out);
 }
@@ -176,6 +184,8 @@ pub const KERNELS: &[Kernel] = &[
     Kernel { name: "Scene::occluded16", query: Query::Occluded(occluded16), simd: true },
     Kernel { name: "Scene::intersect_stream", query: Query::Intersect(intersect_stream), simd: true },
     Kernel { name: "Scene::occluded_stream", query: Query::Occluded(occluded_stream), simd: true },
+    Kernel { name: "Scene::intersect_interleaved", query: Query::Intersect(intersect_interleaved), simd: true },
+    Kernel { name: "Scene::occluded_interleaved", query: Query::Occluded(occluded_interleaved), simd: true },
 ];
 
 /// The SIMD kernels of [`KERNELS`] (those that run on the scene's ISA).

@@ -126,6 +126,43 @@ pub(crate) fn huge_page_vec<T>(capacity: usize) -> Vec<T> {
     v
 }
 
+/// Bytes of the CPU's last-level cache (the largest data or unified cache that
+/// `/sys/devices/system/cpu/cpu0/cache` lists), read once per process; 32 MiB where it
+/// cannot be read (not Linux, or no such directory). The streams interleave single rays in
+/// trees larger than this ([`crate::bvh::Bvh8::interleaves`]).
+pub fn last_level_cache_bytes() -> u64 {
+    static BYTES: std::sync::OnceLock<u64> = std::sync::OnceLock::new();
+    *BYTES.get_or_init(|| read_last_level_cache().unwrap_or(32 << 20))
+}
+
+fn read_last_level_cache() -> Option<u64> {
+    let dir = std::fs::read_dir("/sys/devices/system/cpu/cpu0/cache").ok()?;
+    let mut best: Option<(u32, u64)> = None;
+    for entry in dir.flatten() {
+        let read = |name: &str| std::fs::read_to_string(entry.path().join(name)).ok();
+        let (Some(level), Some(kind), Some(size)) = (read("level"), read("type"), read("size")) else { continue };
+        if kind.trim() == "Instruction" {
+            continue;
+        }
+        let (Ok(level), Some(bytes)) = (level.trim().parse::<u32>(), parse_cache_size(size.trim())) else { continue };
+        if best.is_none_or(|(l, _)| level > l) {
+            best = Some((level, bytes));
+        }
+    }
+    best.map(|(_, bytes)| bytes)
+}
+
+/// A cache size as sysfs writes it: `32768K`, `1M` or a number of bytes.
+fn parse_cache_size(s: &str) -> Option<u64> {
+    let (digits, unit) = match s.as_bytes().last()? {
+        b'K' => (&s[..s.len() - 1], 1 << 10),
+        b'M' => (&s[..s.len() - 1], 1 << 20),
+        b'G' => (&s[..s.len() - 1], 1 << 30),
+        _ => (s, 1),
+    };
+    digits.parse::<u64>().ok()?.checked_mul(unit)
+}
+
 /// Bytes of a committed scene's geometry store: vertex positions and normals, indices,
 /// per-triangle materials and spheres (materials, lights and camera excluded).
 pub fn store_bytes(scene: &Scene) -> usize {

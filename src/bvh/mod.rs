@@ -4,10 +4,11 @@
 //! * [`build_sah`] builds a binary BVH ([`Bvh2`]) with a binned surface area heuristic.
 //! * [`Bvh2`] is also the scalar reference traversal that faster kernels are tested against.
 //! * [`collapse()`] turns it into the 8-wide [`Bvh8`] ([`Bvh8Node`], SoA leaf blocks) that the
-//!   SIMD kernels of [`traverse1`] (single rays) and [`traverse_packet`] (8/16-ray packets,
-//!   with the [`frustum`] of coherent ones; the frustum of a cone of rays also answers
-//!   whether any of them can hit) traverse; [`queries`] holds their entry points,
-//!   instantiated per ISA tier and counting their work through [`counters`].
+//!   SIMD kernels of [`traverse1`] (single rays), [`traverse_interleaved`] (single rays,
+//!   several in flight at once) and [`traverse_packet`] (8/16-ray packets, with the
+//!   [`frustum`] of coherent ones; the frustum of a cone of rays also answers whether any of
+//!   them can hit) traverse; [`queries`] holds their entry points, instantiated per ISA tier
+//!   and counting their work through [`counters`].
 
 pub mod array;
 pub mod build_sah;
@@ -22,6 +23,7 @@ pub mod queries;
 pub mod spatial;
 pub mod stats;
 pub mod traverse1;
+pub mod traverse_interleaved;
 pub mod traverse_packet;
 pub mod validate;
 

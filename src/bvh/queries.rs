@@ -6,18 +6,20 @@
 //! |---|---|---|
 //! | [`Bvh8::intersect1_with`], [`Bvh8::occluded1_with`] | [`crate::bvh::traverse1`] | one |
 //! | [`Bvh8::intersect_packet_with`], [`Bvh8::occluded_packet_with`] | [`crate::bvh::traverse_packet`] | 8 or 16 (a [`RayPacket`]) |
-//! | [`Bvh8::intersect_stream_with`], [`Bvh8::occluded_stream_with`] | the packet kernels on consecutive packets of the ISA's stream width | any number, on the calling thread |
+//! | [`Bvh8::intersect_interleaved_with`], [`Bvh8::occluded_interleaved_with`] | [`crate::bvh::traverse_interleaved`] | any number, on the calling thread |
+//! | [`Bvh8::intersect_stream_with`], [`Bvh8::occluded_stream_with`] | the packet kernels on consecutive packets of the ISA's stream width; in trees larger than the last-level cache, the interleaved kernels on the rays of incoherent packets | any number, on the calling thread |
 //! | [`Bvh8::cone_may_hit_with`] | [`crate::bvh::frustum`] (a cone of rays as one interval frustum) | a cone of them |
 //!
 //! Every query takes the ISA to run on (normally the scene's, [`crate::Scene::isa`]) and a
 //! work [`Counter`] ([`NoCount`] compiles away).
 
 use crate::bvh::Bvh8;
+use crate::bvh::bvh8::Bvh8Ref;
 use crate::bvh::counters::{Counter, NoCount};
 use crate::bvh::frustum::Frustum;
 use crate::bvh::traverse_packet::{OccluderCache, PacketRays, intersect_hybrid, occluded_hybrid};
 use crate::bvh::traverse1::Ray1;
-use crate::geometry::{MollerTrumboreKernel, TriBlock, TriangleTest, WatertightKernel};
+use crate::geometry::{MollerTrumboreKernel, TriBlock, TriangleKernel, TriangleTest, WatertightKernel};
 use crate::math::Vec3;
 use crate::ray::{Hit, Ray, RayPacket};
 use crate::simd::isa::{IsaOp, dispatch};
@@ -143,6 +145,40 @@ impl<T: TriBlock, R: RayPacket, C: Counter> IsaOp for OccludedPacket<'_, T, R, C
     }
 }
 
+struct IntersectInterleaved<'a, T: TriBlock, C, R> {
+    bvh: &'a Bvh8<T>,
+    rays: &'a [Ray],
+    ids: R,
+    hits: &'a mut [Hit],
+    counter: &'a mut C,
+}
+
+impl<T: TriBlock, C: Counter, R: Iterator<Item = usize>> IsaOp for IntersectInterleaved<'_, T, C, R> {
+    type Output = ();
+    #[inline(always)]
+    fn run<I: IsaLanes>(self) {
+        let bvh = self.bvh.slices();
+        with_kernel!(bvh.test, P => bvh.intersect_interleaved::<I, P, C>(self.rays, self.ids, self.hits, self.counter))
+    }
+}
+
+struct OccludedInterleaved<'a, T: TriBlock, C, R> {
+    bvh: &'a Bvh8<T>,
+    rays: &'a [Ray],
+    ids: R,
+    occluded: &'a mut [bool],
+    counter: &'a mut C,
+}
+
+impl<T: TriBlock, C: Counter, R: Iterator<Item = usize>> IsaOp for OccludedInterleaved<'_, T, C, R> {
+    type Output = ();
+    #[inline(always)]
+    fn run<I: IsaLanes>(self) {
+        let bvh = self.bvh.slices();
+        with_kernel!(bvh.test, P => bvh.occluded_interleaved::<I, P, C>(self.rays, self.ids, self.occluded, self.counter))
+    }
+}
+
 struct IntersectStream<'a, T: TriBlock, C> {
     bvh: &'a Bvh8<T>,
     rays: &'a [Ray],
@@ -154,22 +190,119 @@ impl<T: TriBlock, C: Counter> IsaOp for IntersectStream<'_, T, C> {
     type Output = ();
     #[inline(always)]
     fn run<I: IsaLanes>(self) {
-        type V<I> = <I as IsaLanes>::Stream;
-        let k = V::<I>::LANES;
+        let k = I::Stream::LANES;
         let (bvh, rays) = (self.bvh.slices(), self.rays);
         with_kernel!(bvh.test, P => {
             for (n, (r, h)) in rays.chunks(k).zip(self.hits.chunks_mut(k)).enumerate() {
                 prefetch_rays(rays, (n + 2) * k, k);
-                let mut p = PacketRays::<V<I>>::new_in::<I::F8>(r, u32::MAX);
-                intersect_hybrid::<_, I, T, P, C>(&bvh, &mut p, HYBRID_THRESHOLD, self.counter);
-                let (mut t, mut u, mut v, mut prim) = ([0.0f32; 16], [0.0f32; 16], [0.0f32; 16], [0u32; 16]);
-                p.store_hits(&mut t, &mut u, &mut v, &mut prim);
-                for (i, out) in h.iter_mut().enumerate() {
-                    let miss = prim[i] == Hit::NONE;
-                    *out = Hit { t: if miss { f32::INFINITY } else { t[i] }, u: u[i], v: v[i], prim: prim[i] };
-                }
+                intersect_stream_packet::<I, T, P, C>(&bvh, r, h, self.counter);
             }
         })
+    }
+}
+
+/// [`IntersectStream`] from ray `from` on, with the rays of incoherent packets
+/// ([`incoherent_packet`]) set aside in `pending` instead of traced; returns where it stopped:
+/// the end of the rays, or the ray after the packet that filled `pending`. (An instantiation
+/// of its own, so that the packet-only stream is compiled as it was.)
+struct IntersectStreamSettingAside<'a, T: TriBlock, C> {
+    bvh: &'a Bvh8<T>,
+    rays: &'a [Ray],
+    hits: &'a mut [Hit],
+    counter: &'a mut C,
+    from: usize,
+    pending: &'a mut Pending,
+}
+
+impl<T: TriBlock, C: Counter> IsaOp for IntersectStreamSettingAside<'_, T, C> {
+    type Output = usize;
+    #[inline(always)]
+    fn run<I: IsaLanes>(self) -> usize {
+        let k = I::Stream::LANES;
+        let (bvh, rays) = (self.bvh.slices(), self.rays);
+        with_kernel!(bvh.test, P => {
+            let mut at = self.from;
+            while at < rays.len() {
+                let batch = at..rays.len().min(at + k);
+                at = batch.end;
+                prefetch_rays(rays, at + k, k);
+                let mut p = PacketRays::<I::Stream>::new_in::<I::F8>(&rays[batch.clone()], u32::MAX);
+                if incoherent_packet(&p) {
+                    if self.pending.add(batch) {
+                        break;
+                    }
+                    continue;
+                }
+                intersect_hybrid::<_, I, T, P, C>(&bvh, &mut p, HYBRID_THRESHOLD, self.counter);
+                store_stream_hits(&p, &mut self.hits[batch]);
+            }
+            at
+        })
+    }
+}
+
+/// [`OccludedStream`] from ray `from` on, setting aside the rays of incoherent packets as
+/// [`IntersectStreamSettingAside`] does.
+struct OccludedStreamSettingAside<'a, T: TriBlock, C> {
+    bvh: &'a Bvh8<T>,
+    rays: &'a [Ray],
+    occluded: &'a mut [bool],
+    counter: &'a mut C,
+    from: usize,
+    pending: &'a mut Pending,
+}
+
+impl<T: TriBlock, C: Counter> IsaOp for OccludedStreamSettingAside<'_, T, C> {
+    type Output = usize;
+    #[inline(always)]
+    fn run<I: IsaLanes>(self) -> usize {
+        let k = I::Stream::LANES;
+        let (bvh, rays) = (self.bvh.slices(), self.rays);
+        let mut cache = OccluderCache::default();
+        with_kernel!(bvh.test, P => {
+            let mut at = self.from;
+            while at < rays.len() {
+                let batch = at..rays.len().min(at + k);
+                at = batch.end;
+                prefetch_rays(rays, at + k, k);
+                let p = PacketRays::<I::Stream>::new_in::<I::F8>(&rays[batch.clone()], u32::MAX);
+                if incoherent_packet(&p) {
+                    if self.pending.add(batch) {
+                        break;
+                    }
+                    continue;
+                }
+                let bits = occluded_hybrid::<_, I, T, P, C>(&bvh, &p, HYBRID_THRESHOLD, &mut cache, self.counter);
+                for (i, x) in self.occluded[batch].iter_mut().enumerate() {
+                    *x = bits >> i & 1 != 0;
+                }
+            }
+            at
+        })
+    }
+}
+
+/// Closest hits of the rays `r` (at most the stream's packet width) into `h`, as one packet.
+#[inline(always)]
+fn intersect_stream_packet<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
+    bvh: &Bvh8Ref<'_, T>,
+    r: &[Ray],
+    h: &mut [Hit],
+    counter: &mut C,
+) {
+    let mut p = PacketRays::<I::Stream>::new_in::<I::F8>(r, u32::MAX);
+    intersect_hybrid::<_, I, T, P, C>(bvh, &mut p, HYBRID_THRESHOLD, counter);
+    store_stream_hits(&p, h);
+}
+
+/// The packet's hits into `h` (one per ray; misses as [`Hit::MISS`]).
+#[inline(always)]
+fn store_stream_hits<V: Lanes>(p: &PacketRays<V>, h: &mut [Hit]) {
+    let (mut t, mut u, mut v, mut prim) = ([0.0f32; 16], [0.0f32; 16], [0.0f32; 16], [0u32; 16]);
+    p.store_hits(&mut t, &mut u, &mut v, &mut prim);
+    for (i, out) in h.iter_mut().enumerate() {
+        let miss = prim[i] == Hit::NONE;
+        *out = Hit { t: if miss { f32::INFINITY } else { t[i] }, u: u[i], v: v[i], prim: prim[i] };
     }
 }
 
@@ -184,21 +317,85 @@ impl<T: TriBlock, C: Counter> IsaOp for OccludedStream<'_, T, C> {
     type Output = ();
     #[inline(always)]
     fn run<I: IsaLanes>(self) {
-        type V<I> = <I as IsaLanes>::Stream;
-        let k = V::<I>::LANES;
+        let k = I::Stream::LANES;
         let (bvh, rays) = (self.bvh.slices(), self.rays);
         let mut cache = OccluderCache::default();
         with_kernel!(bvh.test, P => {
             for (n, (r, o)) in rays.chunks(k).zip(self.occluded.chunks_mut(k)).enumerate() {
                 prefetch_rays(rays, (n + 2) * k, k);
-                let p = PacketRays::<V<I>>::new_in::<I::F8>(r, u32::MAX);
-                let bits = occluded_hybrid::<_, I, T, P, C>(&bvh, &p, HYBRID_THRESHOLD, &mut cache, self.counter);
-                for (i, x) in o.iter_mut().enumerate() {
-                    *x = bits >> i & 1 != 0;
-                }
+                occluded_stream_packet::<I, T, P, C>(&bvh, r, o, &mut cache, self.counter);
             }
         })
     }
+}
+
+/// Which of the rays `r` (at most the stream's packet width) are blocked, into `o`, as one
+/// packet carrying `cache`.
+#[inline(always)]
+fn occluded_stream_packet<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
+    bvh: &Bvh8Ref<'_, T>,
+    r: &[Ray],
+    o: &mut [bool],
+    cache: &mut OccluderCache,
+    counter: &mut C,
+) {
+    let p = PacketRays::<I::Stream>::new_in::<I::F8>(r, u32::MAX);
+    let bits = occluded_hybrid::<_, I, T, P, C>(bvh, &p, HYBRID_THRESHOLD, cache, counter);
+    for (i, x) in o.iter_mut().enumerate() {
+        *x = bits >> i & 1 != 0;
+    }
+}
+
+/// Rays of incoherent packets set aside for the interleaved kernels
+/// ([`crate::bvh::traverse_interleaved`]), as runs of consecutive rays.
+struct Pending {
+    /// `(first ray, count)` of each run.
+    runs: [(u32, u32); PENDING_RUNS],
+    len: usize,
+}
+
+/// Packets set aside before they are traced: 64 packets of 16 rays (a stream batch), so that
+/// the flights rarely drain before the batch ends.
+const PENDING_RUNS: usize = 64;
+
+impl Pending {
+    fn new() -> Self {
+        Self { runs: [(0, 0); PENDING_RUNS], len: 0 }
+    }
+
+    /// Sets aside the rays `run`; true when full (to be drained now).
+    #[inline(always)]
+    fn add(&mut self, run: std::ops::Range<usize>) -> bool {
+        self.runs[self.len] = (run.start as u32, run.len() as u32);
+        self.len += 1;
+        self.len == PENDING_RUNS
+    }
+
+    fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The rays set aside, in order, leaving none.
+    #[inline(always)]
+    fn drain(&mut self) -> impl Iterator<Item = usize> + '_ {
+        let len = std::mem::take(&mut self.len);
+        self.runs[..len].iter().flat_map(|&(first, count)| first as usize..(first + count) as usize)
+    }
+}
+
+/// True when the packet's valid rays have directions of both signs on two axes or three: a
+/// packet of diffuse bounces, say, where camera rays have both signs on one axis at most (in
+/// the tiles that straddle the image's middle row or column, or on two in the one at its
+/// centre). Such packets' rays go to the interleaved kernels in trees larger than the caches.
+#[inline(always)]
+fn incoherent_packet<V: Lanes>(p: &PacketRays<V>) -> bool {
+    let valid = p.active.bitmask();
+    let zero = V::splat(0.0);
+    let mixed = |d: V| {
+        let neg = d.lt(zero).bitmask() & valid;
+        (neg != 0 && neg != valid) as u32
+    };
+    mixed(p.dir.x) + mixed(p.dir.y) + mixed(p.dir.z) >= 2
 }
 
 /// Prefetches the `k` rays from `rays[start]`, if there are any.
@@ -275,16 +472,199 @@ impl<T: TriBlock> Bvh8<T> {
     }
 
     /// Closest hits of `rays` into `hits` (same length) on the calling thread, as packets of
-    /// consecutive rays, on `isa`'s kernels. Misses are [`Hit::MISS`].
+    /// consecutive rays, on `isa`'s kernels. Misses are [`Hit::MISS`]. In a tree larger than
+    /// the last-level cache ([`Bvh8::interleaves`]) the rays of incoherent packets (directions
+    /// of both signs on two axes or more) are traced as single rays several at a time instead
+    /// ([`crate::bvh::traverse_interleaved`]).
     pub fn intersect_stream_with<C: Counter>(&self, isa: Isa, rays: &[Ray], hits: &mut [Hit], counter: &mut C) {
+        self.intersect_stream_as(isa, rays, hits, counter, self.interleaves());
+    }
+
+    /// [`Bvh8::intersect_stream_with`], interleaving the rays of incoherent packets when
+    /// `interleave` is set, whatever the tree's size.
+    pub(crate) fn intersect_stream_as<C: Counter>(
+        &self,
+        isa: Isa,
+        rays: &[Ray],
+        hits: &mut [Hit],
+        counter: &mut C,
+        interleave: bool,
+    ) {
         assert_eq!(rays.len(), hits.len(), "one hit per ray");
-        dispatch(isa, IntersectStream { bvh: self, rays, hits, counter })
+        if !interleave {
+            return dispatch(isa, IntersectStream { bvh: self, rays, hits, counter });
+        }
+        let (mut pending, mut at) = (Pending::new(), 0);
+        while at < rays.len() {
+            let op = IntersectStreamSettingAside {
+                bvh: self,
+                rays,
+                hits: &mut *hits,
+                counter: &mut *counter,
+                from: at,
+                pending: &mut pending,
+            };
+            at = dispatch(isa, op);
+            if !pending.is_empty() {
+                dispatch(
+                    isa,
+                    IntersectInterleaved {
+                        bvh: self,
+                        rays,
+                        ids: pending.drain(),
+                        hits: &mut *hits,
+                        counter: &mut *counter,
+                    },
+                );
+            }
+        }
     }
 
     /// Occlusion of `rays` into `occluded` (same length) on the calling thread, as packets of
-    /// consecutive rays carrying an [`OccluderCache`], on `isa`'s kernels.
+    /// consecutive rays carrying an [`OccluderCache`], on `isa`'s kernels; the rays of
+    /// incoherent packets interleaved as in [`Bvh8::intersect_stream_with`].
     pub fn occluded_stream_with<C: Counter>(&self, isa: Isa, rays: &[Ray], occluded: &mut [bool], counter: &mut C) {
+        self.occluded_stream_as(isa, rays, occluded, counter, self.interleaves());
+    }
+
+    /// [`Bvh8::occluded_stream_with`], interleaving the rays of incoherent packets when
+    /// `interleave` is set, whatever the tree's size.
+    pub(crate) fn occluded_stream_as<C: Counter>(
+        &self,
+        isa: Isa,
+        rays: &[Ray],
+        occluded: &mut [bool],
+        counter: &mut C,
+        interleave: bool,
+    ) {
         assert_eq!(rays.len(), occluded.len(), "one answer per ray");
-        dispatch(isa, OccludedStream { bvh: self, rays, occluded, counter })
+        if !interleave {
+            return dispatch(isa, OccludedStream { bvh: self, rays, occluded, counter });
+        }
+        let (mut pending, mut at) = (Pending::new(), 0);
+        while at < rays.len() {
+            let op = OccludedStreamSettingAside {
+                bvh: self,
+                rays,
+                occluded: &mut *occluded,
+                counter: &mut *counter,
+                from: at,
+                pending: &mut pending,
+            };
+            at = dispatch(isa, op);
+            if !pending.is_empty() {
+                dispatch(
+                    isa,
+                    OccludedInterleaved {
+                        bvh: self,
+                        rays,
+                        ids: pending.drain(),
+                        occluded: &mut *occluded,
+                        counter: &mut *counter,
+                    },
+                );
+            }
+        }
+    }
+
+    /// True when the streams interleave the single rays of incoherent packets
+    /// ([`crate::bvh::traverse_interleaved`]): when the tree is larger than the last-level
+    /// cache ([`crate::memory::last_level_cache_bytes`]).
+    pub fn interleaves(&self) -> bool {
+        self.bytes() as u64 > crate::memory::last_level_cache_bytes()
+    }
+
+    /// Closest hits of `rays` into `hits` (same length) on the calling thread as single rays,
+    /// [`crate::bvh::traverse_interleaved::FLIGHTS`] in flight at once, on `isa`'s kernels.
+    pub fn intersect_interleaved_with<C: Counter>(&self, isa: Isa, rays: &[Ray], hits: &mut [Hit], counter: &mut C) {
+        assert_eq!(rays.len(), hits.len(), "one hit per ray");
+        dispatch(isa, IntersectInterleaved { bvh: self, rays, ids: 0..rays.len(), hits, counter })
+    }
+
+    /// Occlusion of `rays` into `occluded` (same length) on the calling thread as single
+    /// rays, several in flight at once, on `isa`'s kernels.
+    pub fn occluded_interleaved_with<C: Counter>(
+        &self,
+        isa: Isa,
+        rays: &[Ray],
+        occluded: &mut [bool],
+        counter: &mut C,
+    ) {
+        assert_eq!(rays.len(), occluded.len(), "one answer per ray");
+        dispatch(isa, OccludedInterleaved { bvh: self, rays, ids: 0..rays.len(), occluded, counter })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::incoherent_packet;
+    use crate::bvh::NoCount;
+    use crate::bvh::traverse_packet::PacketRays;
+    use crate::generate::random_soup;
+    use crate::rng::Rng;
+    use crate::simd::F32x16;
+    use crate::{BuildOptions, Hit, Isa, Material, Ray, SceneBuilder, Vec3};
+
+    /// Packets of 16 rays, alternately coherent (one origin, directions in a narrow cone, as
+    /// camera rays) and incoherent (origins and directions at random, as diffuse bounces).
+    fn mixed_packets(packets: usize) -> Vec<Ray> {
+        let mut rng = Rng::new(3, 9);
+        let mut r3 = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 - 1.0;
+        let mut rays = Vec::new();
+        for p in 0..packets {
+            let (origin, dir) = (Vec3::new(0.1, 0.2, 4.0), Vec3::new(0.3, -0.2, -1.0) + r3() * 0.3);
+            for _ in 0..16 {
+                rays.push(if p % 2 == 0 { Ray::new(origin, dir + r3() * 0.05) } else { Ray::new(r3() * 1.5, r3()) });
+            }
+        }
+        rays
+    }
+
+    #[test]
+    fn coherence_of_packets() {
+        let incoherent = |rays: &[Ray]| incoherent_packet(&PacketRays::<F32x16>::new(rays, u32::MAX));
+        let rays = mixed_packets(2);
+        assert!(!incoherent(&rays[..16]) && incoherent(&rays[16..]));
+        assert!(incoherent(&rays[16..24]), "a partial packet");
+        let one_axis: Vec<Ray> = (0..16).map(|i| Ray::new(Vec3::ZERO, Vec3::new(i as f32 - 7.5, -1.0, -1.0))).collect();
+        assert!(!incoherent(&one_axis), "camera rays straddling the middle column are coherent");
+        // Only the valid lanes count: the packet's last ray is not valid.
+        let mut two_axes = one_axis.clone();
+        two_axes[15] = Ray { tnear: f32::NAN, ..Ray::new(Vec3::ZERO, Vec3::new(1.0, 1.0, -1.0)) };
+        assert!(!incoherent(&two_axes));
+        two_axes[15].tnear = 0.0;
+        assert!(incoherent(&two_axes));
+    }
+
+    /// Streams that interleave the rays of their incoherent packets (forced here, in a tree
+    /// that fits the caches) answer each ray as the single-ray kernels do, on every ISA tier,
+    /// over more incoherent packets than are set aside at once.
+    #[test]
+    fn interleaving_streams_answer_as_single_rays() {
+        let mesh = random_soup(3000, 0.2, 11);
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::default());
+        b.add_mesh(&mesh.positions, &mesh.indices, m).unwrap();
+        b.add_sphere(Vec3::new(0.5, 0.5, 0.5), 0.3, m).unwrap();
+        let (scene, _) = b.commit(&BuildOptions::default());
+        let bvh = scene.bvh8();
+        let mut rays = mixed_packets(2 * super::PENDING_RUNS + 37);
+        rays.truncate(rays.len() - 5);
+        rays[20] = Ray { tnear: f32::NAN, ..rays[20] }; // not valid: misses, not blocked
+        for isa in Isa::available() {
+            let mut hits = vec![Hit { t: -1.0, ..Hit::MISS }; rays.len()];
+            let mut blocked = vec![true; rays.len()];
+            bvh.intersect_stream_as(isa, &rays, &mut hits, &mut NoCount, true);
+            bvh.occluded_stream_as(isa, &rays, &mut blocked, &mut NoCount, true);
+            let mut hit_count = 0;
+            for (i, r) in rays.iter().enumerate() {
+                let want = bvh.intersect1_with(isa, r, &mut NoCount);
+                assert_eq!(hits[i].is_hit(), want.is_hit(), "{isa} ray {i}");
+                assert_eq!(hits[i].t.to_bits(), want.t.to_bits(), "{isa} ray {i}");
+                assert_eq!(blocked[i], bvh.occluded1_with(isa, r, &mut NoCount), "{isa} ray {i}");
+                hit_count += want.is_hit() as usize;
+            }
+            assert!(hit_count > rays.len() / 4 && !hits[20].is_hit() && !blocked[20], "{isa}: {hit_count} hits");
+        }
     }
 }

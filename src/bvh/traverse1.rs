@@ -178,7 +178,7 @@ impl<V: Lanes> Ray1<V> {
 // --quality medium --methods Scene::intersect1,rtcIntersect1`, interleaved rounds): see
 // PERFORMANCE.md, "Inner children computed, not loaded".
 #[inline(always)]
-fn next_child(node: &Bvh8Node, i: usize) -> NodeRef {
+pub(crate) fn next_child(node: &Bvh8Node, i: usize) -> NodeRef {
     let c = node.children[i];
     if c.is_leaf() { c } else { node.inner_child(i) }
 }
@@ -294,13 +294,7 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                     let mut d = [0.0f32; 8];
                     dist.store(&mut d);
                     // Two or more children will be visited: start fetching all of them now.
-                    let mut m = mask;
-                    while m != 0 {
-                        let i = m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        self.prefetch(node.children[i]);
-                    }
-                    self.prefetch(node.children[i0]);
+                    self.prefetch_children(node, i0, mask);
                     let i1 = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
                     if mask == 0 {
@@ -311,42 +305,8 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                         cur = next_child(node, descent_slot::<I, SPECULATE>(near));
                         continue;
                     }
-                    // Three or more: continue with the nearest (of equal distances the last
-                    // slot, where a stable sort by decreasing distance would put it on top),
-                    // push the others and sort the pushed run by decreasing distance
-                    // (insertion sort).
-                    let rest = mask;
-                    let mut near = if d[i1] <= d[i0] { i1 } else { i0 };
-                    let mut m = rest;
-                    while m != 0 {
-                        let i = m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        if d[i] <= d[near] {
-                            near = i;
-                        }
-                    }
-                    let base = sp;
-                    let mut m = (rest | 1 << i0 | 1 << i1) & !(1 << near);
-                    while m != 0 {
-                        let i = m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        refs[sp] = MaybeUninit::new(node.children[i]);
-                        dists[sp] = MaybeUninit::new(d[i]);
-                        sp += 1;
-                    }
-                    for i in base + 1..sp {
-                        // SAFETY: entries base..sp were written just above.
-                        let (rr, dd) = unsafe { (refs[i].assume_init(), dists[i].assume_init()) };
-                        let mut j = i;
-                        // SAFETY: base <= j - 1 < sp, written above.
-                        while j > base && unsafe { dists[j - 1].assume_init() } < dd {
-                            refs[j] = refs[j - 1];
-                            dists[j] = dists[j - 1];
-                            j -= 1;
-                        }
-                        refs[j] = MaybeUninit::new(rr);
-                        dists[j] = MaybeUninit::new(dd);
-                    }
+                    // Three or more: continue with the nearest, push the others sorted.
+                    let near = push_all_but_nearest(node, i0, i1, mask, &d, &mut refs, &mut dists, &mut sp);
                     cur = next_child(node, descent_slot::<I, SPECULATE>(near));
                 }
                 self.intersect_leaf1::<I, P, C>(cur, r, &pre, tnear, &mut tfar, &mut hit, counter);
@@ -368,10 +328,23 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
         }
     }
 
+    /// Prefetches the children of `node` in the slots set in `rest` (from the lowest up), then
+    /// the one in slot `i0`.
+    #[inline(always)]
+    pub(crate) fn prefetch_children(&self, node: &Bvh8Node, i0: usize, rest: u32) {
+        let mut m = rest;
+        while m != 0 {
+            let i = m.trailing_zeros() as usize;
+            m &= m - 1;
+            self.prefetch(node.children[i]);
+        }
+        self.prefetch(node.children[i0]);
+    }
+
     /// The closest hit in `leaf` nearer than `tfar` (which it shrinks), into `hit`.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn intersect_leaf1<I: IsaLanes, P: TriangleKernel, C: Counter>(
+    pub(crate) fn intersect_leaf1<I: IsaLanes, P: TriangleKernel, C: Counter>(
         &self,
         leaf: NodeRef,
         r: &Ray1<I::F8>,
@@ -440,42 +413,15 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                 while !cur.is_leaf() {
                     let node = &self.nodes[cur.node_index()];
                     counter.add(Work::Nodes, 1);
-                    let (mut mask, _) = r.intersect_node(node, r.ray.tfar);
+                    let (mask, _) = r.intersect_node(node, r.ray.tfar);
                     if mask == 0 {
                         break 'descend;
                     }
-                    // The highest slot now; the others pushed from the lowest up, so that
-                    // they pop from the highest down.
-                    let first = 31 - mask.leading_zeros() as usize;
-                    mask &= !(1 << first);
-                    while mask != 0 {
-                        let i = mask.trailing_zeros() as usize;
-                        mask &= mask - 1;
-                        stack[sp] = MaybeUninit::new(node.children[i]);
-                        sp += 1;
-                    }
+                    let first = push_below_highest(node, mask, &mut stack, &mut sp);
                     cur = next_child(node, descent_slot::<I, SPECULATE>(first));
                 }
-                let range = cur.blocks();
-                counter.add(Work::Leaves, 1);
-                match cur.kind() {
-                    LeafKind::Triangles => {
-                        for block in &self.tris[range] {
-                            counter.add(Work::Blocks, 1);
-                            if P::block(block, &pre, tnear, tfar).mask != 0 {
-                                return true;
-                            }
-                        }
-                    }
-                    LeafKind::Spheres => {
-                        for block in &self.spheres[range] {
-                            counter.add(Work::Blocks, 1);
-                            let (m, _) = block.intersect1::<I::F4>(r.ray.origin, r.ray.dir, r.ray.tnear, r.ray.tfar);
-                            if m != 0 {
-                                return true;
-                            }
-                        }
-                    }
+                if self.occluded_leaf1::<I, P, C>(cur, r, &pre, tnear, tfar, counter) {
+                    return true;
                 }
             }
             if sp == 0 {
@@ -486,6 +432,116 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
             cur = unsafe { stack[sp].assume_init() };
         }
     }
+
+    /// True when something in `leaf` blocks the ray `r` over `(tnear, tfar]` (`pre`, `tnear`,
+    /// `tfar`: the triangle test's constants of `r` and its interval, in lanes).
+    #[inline(always)]
+    pub(crate) fn occluded_leaf1<I: IsaLanes, P: TriangleKernel, C: Counter>(
+        &self,
+        leaf: NodeRef,
+        r: &Ray1<I::F8>,
+        pre: &P::Ray1<T::Lanes<I>>,
+        tnear: T::Lanes<I>,
+        tfar: T::Lanes<I>,
+        counter: &mut C,
+    ) -> bool {
+        let range = leaf.blocks();
+        counter.add(Work::Leaves, 1);
+        match leaf.kind() {
+            LeafKind::Triangles => {
+                for block in &self.tris[range] {
+                    counter.add(Work::Blocks, 1);
+                    if P::block(block, pre, tnear, tfar).mask != 0 {
+                        return true;
+                    }
+                }
+            }
+            LeafKind::Spheres => {
+                for block in &self.spheres[range] {
+                    counter.add(Work::Blocks, 1);
+                    let (m, _) = block.intersect1::<I::F4>(r.ray.origin, r.ray.dir, r.ray.tnear, r.ray.tfar);
+                    if m != 0 {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
+}
+
+/// The closest-hit kernels' order when three or more children of `node` are hit (`i0` and
+/// `i1`, the lowest two hit slots, and the others in `rest`, not empty; entry distances `d`):
+/// returns the nearest slot, to descend to (of equal distances the last slot, where a stable
+/// sort by decreasing distance would put it on top), and pushes the others onto `refs` /
+/// `dists` above `sp`, sorted by decreasing distance (insertion sort), so that the nearest
+/// pops first.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn push_all_but_nearest(
+    node: &Bvh8Node,
+    i0: usize,
+    i1: usize,
+    rest: u32,
+    d: &[f32; 8],
+    refs: &mut [MaybeUninit<NodeRef>; BVH8_STACK],
+    dists: &mut [MaybeUninit<f32>; BVH8_STACK],
+    sp: &mut usize,
+) -> usize {
+    let mut near = if d[i1] <= d[i0] { i1 } else { i0 };
+    let mut m = rest;
+    while m != 0 {
+        let i = m.trailing_zeros() as usize;
+        m &= m - 1;
+        if d[i] <= d[near] {
+            near = i;
+        }
+    }
+    let base = *sp;
+    let mut m = (rest | 1 << i0 | 1 << i1) & !(1 << near);
+    while m != 0 {
+        let i = m.trailing_zeros() as usize;
+        m &= m - 1;
+        refs[*sp] = MaybeUninit::new(node.children[i]);
+        dists[*sp] = MaybeUninit::new(d[i]);
+        *sp += 1;
+    }
+    for i in base + 1..*sp {
+        // SAFETY: entries base..sp were written just above.
+        let (rr, dd) = unsafe { (refs[i].assume_init(), dists[i].assume_init()) };
+        let mut j = i;
+        // SAFETY: base <= j - 1 < sp, written above.
+        while j > base && unsafe { dists[j - 1].assume_init() } < dd {
+            refs[j] = refs[j - 1];
+            dists[j] = dists[j - 1];
+            j -= 1;
+        }
+        refs[j] = MaybeUninit::new(rr);
+        dists[j] = MaybeUninit::new(dd);
+    }
+    near
+}
+
+/// The any-hit kernels' order: of the hit children `mask` (not empty) of `node`, returns the
+/// highest slot (the one to descend to) and pushes the others onto `stack` above `sp` from
+/// the lowest up, so that they pop from the highest down: a node's leaves (its last slots)
+/// before its subtrees.
+#[inline(always)]
+pub(crate) fn push_below_highest(
+    node: &Bvh8Node,
+    mut mask: u32,
+    stack: &mut [MaybeUninit<NodeRef>; BVH8_STACK],
+    sp: &mut usize,
+) -> usize {
+    let first = 31 - mask.leading_zeros() as usize;
+    mask &= !(1 << first);
+    while mask != 0 {
+        let i = mask.trailing_zeros() as usize;
+        mask &= mask - 1;
+        stack[*sp] = MaybeUninit::new(node.children[i]);
+        *sp += 1;
+    }
+    first
 }
 
 #[cfg(test)]

@@ -8,7 +8,11 @@
 //!
 //! Streams therefore trace every batch as 16-ray packets, coherent or not (single rays for
 //! incoherent batches, and tiles of 4 packets under one frustum, were slower: PERFORMANCE.md,
-//! "Streams"). Shadow-ray streams also carry an
+//! "Streams"), but in a tree larger than the last-level cache ([`crate::bvh::Bvh8::interleaves`]):
+//! there the rays of incoherent packets are traced as single rays, several in flight at once
+//! so that their cache misses overlap ([`crate::bvh::traverse_interleaved`];
+//! [`Scene::intersect_interleaved`] and [`Scene::occluded_interleaved`] trace that way
+//! whatever the tree). Shadow-ray streams also carry an
 //! [`OccluderCache`](crate::bvh::traverse_packet::OccluderCache) from packet to packet.
 
 use crate::bvh::{Counter, NoCount};
@@ -164,6 +168,42 @@ impl Scene {
             .zip(occluded.par_chunks_mut(STREAM_CHUNK))
             .with_max_len(1)
             .for_each(|(r, o)| self.occluded_batch(r, o));
+    }
+
+    /// Closest hits of `rays` into `hits` (same length) on the calling thread, traced as single
+    /// rays with several in flight at once, so that one ray's cache misses overlap the
+    /// others' steps ([`crate::bvh::traverse_interleaved`]): for incoherent rays (diffuse
+    /// bounces) in scenes whose BVH is larger than the last-level cache, where it is the
+    /// fastest of the queries; where the BVH fits the caches it is the slowest. The streams
+    /// ([`Scene::intersect_stream`]) trace the incoherent packets of such scenes this way by
+    /// themselves. The hits are [`Scene::intersect1`]'s.
+    ///
+    /// ```
+    /// # use raypack::{BuildOptions, Hit, Material, Ray, SceneBuilder, Vec3};
+    /// let mut b = SceneBuilder::new();
+    /// let m = b.add_material(Material::default());
+    /// b.add_sphere(Vec3::ZERO, 1.0, m)?;
+    /// let (scene, _) = b.commit(&BuildOptions::default());
+    /// let rays: Vec<Ray> = (0..100).map(|i| Ray::new(Vec3::ZERO, Vec3::new((i as f32).cos(), (i as f32).sin(), 0.3))).collect();
+    /// let mut hits = vec![Hit::MISS; rays.len()];
+    /// scene.intersect_interleaved(&rays, &mut hits);
+    /// assert!(rays.iter().zip(&hits).all(|(r, h)| *h == scene.intersect1(r)));
+    /// # Ok::<(), raypack::SceneError>(())
+    /// ```
+    pub fn intersect_interleaved(&self, rays: &[Ray], hits: &mut [Hit]) {
+        self.bvh8.intersect_interleaved_with(self.isa, rays, hits, &mut NoCount);
+        if self.has_spheres() {
+            for (ray, out) in rays.iter().zip(hits.iter_mut()) {
+                self.finish_hit(ray, out);
+            }
+        }
+    }
+
+    /// Which of `rays` are blocked over `(tnear, tfar]`, into `occluded` (same length), on the
+    /// calling thread, as single rays with several in flight at once (see
+    /// [`Scene::intersect_interleaved`]). The answers are [`Scene::occluded1`]'s.
+    pub fn occluded_interleaved(&self, rays: &[Ray], occluded: &mut [bool]) {
+        self.bvh8.occluded_interleaved_with(self.isa, rays, occluded, &mut NoCount);
     }
 
     /// [`Scene::occluded_stream`] on the calling thread only.

@@ -77,6 +77,9 @@ pub struct BuildInfo {
     pub valid: Option<Result<(), String>>,
     /// Peak resident memory the commit added to the process (see [`PeakResident`]).
     pub peak_added_bytes: Option<u64>,
+    /// True when the streams trace incoherent packets as interleaved single rays (the BVH8
+    /// is larger than the last-level cache, [`raypack::bvh::Bvh8::interleaves`]).
+    pub interleaves: bool,
 }
 
 /// Figures of one Embree build over the same triangles (`raypack info --against embree`).
@@ -218,6 +221,7 @@ pub fn scene_info(path: Option<&Path>, opts: &InfoOptions) -> Result<SceneInfo, 
             bvh2_bytes: scene.bvh2().map_or(0, |b| b.bytes()),
             valid,
             peak_added_bytes,
+            interleaves: scene.bvh8().interleaves(),
         });
         if last && opts.against_embree && !opts.embree_first {
             info.embree_builds = embree_builds(&scene.triangles, scene.num_spheres(), opts.isa)?;
@@ -328,6 +332,15 @@ impl SceneInfo {
             if let Some(p) = bi.peak_added_bytes {
                 let _ = writeln!(s, "  peak       +{} resident during the commit", mb(p as usize));
             }
+            let llc = mb(raypack::memory::last_level_cache_bytes() as usize);
+            let _ = if bi.interleaves {
+                writeln!(
+                    s,
+                    "  streams    incoherent packets as interleaved single rays (bvh8 larger than the {llc} last-level cache)"
+                )
+            } else {
+                writeln!(s, "  streams    16-ray packets (bvh8 within the {llc} last-level cache)")
+            };
             match &bi.valid {
                 Some(Ok(())) => {
                     let _ = writeln!(s, "  validate   ok");
@@ -389,6 +402,7 @@ impl SceneInfo {
                     },
                     "valid": bi.valid.as_ref().map(|v| v.clone().err().unwrap_or_else(|| "ok".into())),
                     "peak_added_bytes": bi.peak_added_bytes,
+                    "streams_interleave": bi.interleaves,
                 })
             })
             .collect();
