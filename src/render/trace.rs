@@ -2,6 +2,11 @@
 //! of rays on the calling thread, as 16-ray packets through the hybrid packet kernels
 //! ([`Scene::intersect_batch`], [`Scene::occluded_batch`]), or (`brute_force`) ray by ray
 //! against every primitive.
+//!
+//! Always as packets: the streams of the library's API trace incoherent packets as
+//! interleaved single rays in a BVH larger than the last-level cache
+//! ([`crate::bvh::traverse_interleaved`]), but the renderer's bounce streams lost by it
+//! (PERFORMANCE.md, "Incoherent rays in large trees: several in flight").
 
 use crate::ray::{Hit, Ray};
 use crate::scene::Scene;
@@ -35,7 +40,7 @@ impl<'a> Tracer<'a> {
                 *h = self.scene.intersect1_brute_force(r);
             }
         } else {
-            self.scene.intersect_batch(rays, hits);
+            self.scene.intersect_batch_as(rays, hits, &mut crate::bvh::NoCount, false);
         }
     }
 
@@ -48,7 +53,7 @@ impl<'a> Tracer<'a> {
                 *o = self.scene.intersect1_brute_force(r).is_hit();
             }
         } else {
-            self.scene.occluded_batch(rays, occluded);
+            self.scene.occluded_batch_as(rays, occluded, &mut crate::bvh::NoCount, false);
         }
     }
 }

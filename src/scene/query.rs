@@ -88,7 +88,9 @@ impl Scene {
     /// Closest hits of `rays` into `hits` (same length), over all rayon threads: the rays are
     /// traced as 16-ray packets in the order given, so consecutive rays should be coherent when
     /// they can be (camera rays in small pixel tiles, shadow rays of neighbouring pixels). The
-    /// packet kernel adapts to incoherent rays by itself (see [`crate::bvh::traverse_packet`]).
+    /// packet kernel adapts to incoherent rays by itself (see [`crate::bvh::traverse_packet`]);
+    /// in a scene whose BVH is larger than the last-level cache, the rays of incoherent packets
+    /// are traced as single rays several at a time instead ([`Scene::intersect_interleaved`]).
     ///
     /// ```
     /// # use raypack::{BuildOptions, Hit, Material, Ray, SceneBuilder, Vec3};
@@ -139,7 +141,20 @@ impl Scene {
 
     /// [`Scene::intersect_batch`], adding the kernels' work to `counter`.
     pub fn intersect_batch_counted<C: Counter>(&self, rays: &[Ray], hits: &mut [Hit], counter: &mut C) {
-        self.bvh8.intersect_stream_with(self.isa, rays, hits, counter);
+        self.intersect_batch_as(rays, hits, counter, self.bvh8.interleaves());
+    }
+
+    /// [`Scene::intersect_batch_counted`], interleaving the rays of incoherent packets when
+    /// `interleave` is set and as packets otherwise, whatever the BVH's size (the renderer's
+    /// choice, [`crate::render::trace`]).
+    pub(crate) fn intersect_batch_as<C: Counter>(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Hit],
+        counter: &mut C,
+        interleave: bool,
+    ) {
+        self.bvh8.intersect_stream_as(self.isa, rays, hits, counter, interleave);
         if self.has_spheres() {
             for (ray, out) in rays.iter().zip(hits.iter_mut()) {
                 self.finish_hit(ray, out);
@@ -213,6 +228,17 @@ impl Scene {
 
     /// [`Scene::occluded_batch`], adding the kernels' work to `counter`.
     pub fn occluded_batch_counted<C: Counter>(&self, rays: &[Ray], occluded: &mut [bool], counter: &mut C) {
-        self.bvh8.occluded_stream_with(self.isa, rays, occluded, counter);
+        self.occluded_batch_as(rays, occluded, counter, self.bvh8.interleaves());
+    }
+
+    /// [`Scene::occluded_batch_counted`] with the choice of [`Scene::intersect_batch_as`].
+    pub(crate) fn occluded_batch_as<C: Counter>(
+        &self,
+        rays: &[Ray],
+        occluded: &mut [bool],
+        counter: &mut C,
+        interleave: bool,
+    ) {
+        self.bvh8.occluded_stream_as(self.isa, rays, occluded, counter, interleave);
     }
 }
