@@ -14,12 +14,11 @@
 //! work [`Counter`] ([`NoCount`] compiles away).
 
 use crate::bvh::Bvh8;
-use crate::bvh::bvh8::Bvh8Ref;
 use crate::bvh::counters::{Counter, NoCount};
 use crate::bvh::frustum::Frustum;
 use crate::bvh::traverse_packet::{OccluderCache, PacketRays, intersect_hybrid, occluded_hybrid};
 use crate::bvh::traverse1::Ray1;
-use crate::geometry::{MollerTrumboreKernel, TriBlock, TriangleKernel, TriangleTest, WatertightKernel};
+use crate::geometry::{MollerTrumboreKernel, TriBlock, TriangleTest, WatertightKernel};
 use crate::math::Vec3;
 use crate::ray::{Hit, Ray, RayPacket};
 use crate::simd::isa::{IsaOp, dispatch};
@@ -190,12 +189,20 @@ impl<T: TriBlock, C: Counter> IsaOp for IntersectStream<'_, T, C> {
     type Output = ();
     #[inline(always)]
     fn run<I: IsaLanes>(self) {
-        let k = I::Stream::LANES;
+        type V<I> = <I as IsaLanes>::Stream;
+        let k = V::<I>::LANES;
         let (bvh, rays) = (self.bvh.slices(), self.rays);
         with_kernel!(bvh.test, P => {
             for (n, (r, h)) in rays.chunks(k).zip(self.hits.chunks_mut(k)).enumerate() {
                 prefetch_rays(rays, (n + 2) * k, k);
-                intersect_stream_packet::<I, T, P, C>(&bvh, r, h, self.counter);
+                let mut p = PacketRays::<V<I>>::new_in::<I::F8>(r, u32::MAX);
+                intersect_hybrid::<_, I, T, P, C>(&bvh, &mut p, HYBRID_THRESHOLD, self.counter);
+                let (mut t, mut u, mut v, mut prim) = ([0.0f32; 16], [0.0f32; 16], [0.0f32; 16], [0u32; 16]);
+                p.store_hits(&mut t, &mut u, &mut v, &mut prim);
+                for (i, out) in h.iter_mut().enumerate() {
+                    let miss = prim[i] == Hit::NONE;
+                    *out = Hit { t: if miss { f32::INFINITY } else { t[i] }, u: u[i], v: v[i], prim: prim[i] };
+                }
             }
         })
     }
@@ -282,19 +289,6 @@ impl<T: TriBlock, C: Counter> IsaOp for OccludedStreamSettingAside<'_, T, C> {
     }
 }
 
-/// Closest hits of the rays `r` (at most the stream's packet width) into `h`, as one packet.
-#[inline(always)]
-fn intersect_stream_packet<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
-    bvh: &Bvh8Ref<'_, T>,
-    r: &[Ray],
-    h: &mut [Hit],
-    counter: &mut C,
-) {
-    let mut p = PacketRays::<I::Stream>::new_in::<I::F8>(r, u32::MAX);
-    intersect_hybrid::<_, I, T, P, C>(bvh, &mut p, HYBRID_THRESHOLD, counter);
-    store_stream_hits(&p, h);
-}
-
 /// The packet's hits into `h` (one per ray; misses as [`Hit::MISS`]).
 #[inline(always)]
 fn store_stream_hits<V: Lanes>(p: &PacketRays<V>, h: &mut [Hit]) {
@@ -317,32 +311,20 @@ impl<T: TriBlock, C: Counter> IsaOp for OccludedStream<'_, T, C> {
     type Output = ();
     #[inline(always)]
     fn run<I: IsaLanes>(self) {
-        let k = I::Stream::LANES;
+        type V<I> = <I as IsaLanes>::Stream;
+        let k = V::<I>::LANES;
         let (bvh, rays) = (self.bvh.slices(), self.rays);
         let mut cache = OccluderCache::default();
         with_kernel!(bvh.test, P => {
             for (n, (r, o)) in rays.chunks(k).zip(self.occluded.chunks_mut(k)).enumerate() {
                 prefetch_rays(rays, (n + 2) * k, k);
-                occluded_stream_packet::<I, T, P, C>(&bvh, r, o, &mut cache, self.counter);
+                let p = PacketRays::<V<I>>::new_in::<I::F8>(r, u32::MAX);
+                let bits = occluded_hybrid::<_, I, T, P, C>(&bvh, &p, HYBRID_THRESHOLD, &mut cache, self.counter);
+                for (i, x) in o.iter_mut().enumerate() {
+                    *x = bits >> i & 1 != 0;
+                }
             }
         })
-    }
-}
-
-/// Which of the rays `r` (at most the stream's packet width) are blocked, into `o`, as one
-/// packet carrying `cache`.
-#[inline(always)]
-fn occluded_stream_packet<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
-    bvh: &Bvh8Ref<'_, T>,
-    r: &[Ray],
-    o: &mut [bool],
-    cache: &mut OccluderCache,
-    counter: &mut C,
-) {
-    let p = PacketRays::<I::Stream>::new_in::<I::F8>(r, u32::MAX);
-    let bits = occluded_hybrid::<_, I, T, P, C>(bvh, &p, HYBRID_THRESHOLD, cache, counter);
-    for (i, x) in o.iter_mut().enumerate() {
-        *x = bits >> i & 1 != 0;
     }
 }
 

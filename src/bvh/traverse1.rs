@@ -294,7 +294,13 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                     let mut d = [0.0f32; 8];
                     dist.store(&mut d);
                     // Two or more children will be visited: start fetching all of them now.
-                    self.prefetch_children(node, i0, mask);
+                    let mut m = mask;
+                    while m != 0 {
+                        let i = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        self.prefetch(node.children[i]);
+                    }
+                    self.prefetch(node.children[i0]);
                     let i1 = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
                     if mask == 0 {
@@ -305,8 +311,42 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                         cur = next_child(node, descent_slot::<I, SPECULATE>(near));
                         continue;
                     }
-                    // Three or more: continue with the nearest, push the others sorted.
-                    let near = push_all_but_nearest(node, i0, i1, mask, &d, &mut refs, &mut dists, &mut sp);
+                    // Three or more: continue with the nearest (of equal distances the last
+                    // slot, where a stable sort by decreasing distance would put it on top),
+                    // push the others and sort the pushed run by decreasing distance
+                    // (insertion sort).
+                    let rest = mask;
+                    let mut near = if d[i1] <= d[i0] { i1 } else { i0 };
+                    let mut m = rest;
+                    while m != 0 {
+                        let i = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        if d[i] <= d[near] {
+                            near = i;
+                        }
+                    }
+                    let base = sp;
+                    let mut m = (rest | 1 << i0 | 1 << i1) & !(1 << near);
+                    while m != 0 {
+                        let i = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        refs[sp] = MaybeUninit::new(node.children[i]);
+                        dists[sp] = MaybeUninit::new(d[i]);
+                        sp += 1;
+                    }
+                    for i in base + 1..sp {
+                        // SAFETY: entries base..sp were written just above.
+                        let (rr, dd) = unsafe { (refs[i].assume_init(), dists[i].assume_init()) };
+                        let mut j = i;
+                        // SAFETY: base <= j - 1 < sp, written above.
+                        while j > base && unsafe { dists[j - 1].assume_init() } < dd {
+                            refs[j] = refs[j - 1];
+                            dists[j] = dists[j - 1];
+                            j -= 1;
+                        }
+                        refs[j] = MaybeUninit::new(rr);
+                        dists[j] = MaybeUninit::new(dd);
+                    }
                     cur = next_child(node, descent_slot::<I, SPECULATE>(near));
                 }
                 self.intersect_leaf1::<I, P, C>(cur, r, &pre, tnear, &mut tfar, &mut hit, counter);
@@ -327,6 +367,15 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
             }
         }
     }
+
+    // The helpers below (`prefetch_children`, `occluded_leaf1`, `push_all_but_nearest`,
+    // `push_below_highest`) are the steps of `intersect1_from` and `occluded1_from` that the
+    // interleaved kernels (`crate::bvh::traverse_interleaved`) share. The two fused kernels keep
+    // their own inline copies: with them calling these helpers (the same code once inlined), a
+    // crate depending on raypack, built with cargo's default profile, traced at 0.93-0.95 of
+    // the project's build on the baseline tier (`tools/dependent-check`, beetle, SSE2, 5 and 7
+    // rounds, stop 49: `Scene::intersect1` 0.947-0.954, `Scene::occluded1` 0.930-0.932) where it
+    // is at 0.95-1.10 with the kernels as they were: their code layout, not their work.
 
     /// Prefetches the children of `node` in the slots set in `rest` (from the lowest up), then
     /// the one in slot `i0`.
@@ -413,15 +462,42 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                 while !cur.is_leaf() {
                     let node = &self.nodes[cur.node_index()];
                     counter.add(Work::Nodes, 1);
-                    let (mask, _) = r.intersect_node(node, r.ray.tfar);
+                    let (mut mask, _) = r.intersect_node(node, r.ray.tfar);
                     if mask == 0 {
                         break 'descend;
                     }
-                    let first = push_below_highest(node, mask, &mut stack, &mut sp);
+                    // The highest slot now; the others pushed from the lowest up, so that
+                    // they pop from the highest down.
+                    let first = 31 - mask.leading_zeros() as usize;
+                    mask &= !(1 << first);
+                    while mask != 0 {
+                        let i = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        stack[sp] = MaybeUninit::new(node.children[i]);
+                        sp += 1;
+                    }
                     cur = next_child(node, descent_slot::<I, SPECULATE>(first));
                 }
-                if self.occluded_leaf1::<I, P, C>(cur, r, &pre, tnear, tfar, counter) {
-                    return true;
+                let range = cur.blocks();
+                counter.add(Work::Leaves, 1);
+                match cur.kind() {
+                    LeafKind::Triangles => {
+                        for block in &self.tris[range] {
+                            counter.add(Work::Blocks, 1);
+                            if P::block(block, &pre, tnear, tfar).mask != 0 {
+                                return true;
+                            }
+                        }
+                    }
+                    LeafKind::Spheres => {
+                        for block in &self.spheres[range] {
+                            counter.add(Work::Blocks, 1);
+                            let (m, _) = block.intersect1::<I::F4>(r.ray.origin, r.ray.dir, r.ray.tnear, r.ray.tfar);
+                            if m != 0 {
+                                return true;
+                            }
+                        }
+                    }
                 }
             }
             if sp == 0 {
