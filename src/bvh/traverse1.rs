@@ -111,11 +111,12 @@ impl<V: Lanes> Ray1<V> {
     // against 7.63), but the rounding of `org * inv` grows with the distance of the origin
     // from the scene and would eat the 2^-20 relative padding of the node boxes for origins
     // more than about 16 scene extents away, making hits near node faces go missing.
-    // Untried: the per-ray constant `org * inv` is exact in f64; rounded from there toward the
-    // side that widens the slab (up for near planes, down for far ones) it would leave only
-    // roundings relative to `t`, which SLAB_WIDEN covers, and make the fused form as robust.
-    // It needs a finite reciprocal (Embree's `rcp_safe`) so that `plane * inv - org * inv`
-    // has no inf - inf.
+    // Tried three times since, and it never paid: robust with the per-ray `org * inv` moved
+    // outward past its rounding; without that rounding, as the best case; robust with `org *
+    // inv` computed exactly in f64 and rounded outward. Slower on the CS184 scenes, even or
+    // slower on the Stanford dragon (PERFORMANCE.md: "Single-ray kernel against
+    // `rtcIntersect1`", "the fused node test", and "Inner children computed, not loaded", its
+    // two retries).
     #[inline(always)]
     pub fn intersect_node(&self, n: &Bvh8Node, tfar: f32) -> (u32, V) {
         let b = &n.bounds;
