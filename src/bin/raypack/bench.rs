@@ -275,6 +275,31 @@ fn repetitions(warm_up: Duration) -> usize {
     ((MIN_RUN.as_secs_f64() / one).ceil() as usize).clamp(1, 1000)
 }
 
+/// A structure built again for `--build-runs`: its figures (of the first build), the times of
+/// its builds so far, and how to build it once more (returning the build's time).
+struct Rebuilds<'a> {
+    figures: BuildFigures,
+    times: Vec<Duration>,
+    again: Box<dyn FnMut() -> Result<Duration, BenchError> + 'a>,
+}
+
+/// Builds every structure of `builds` `rounds` more times, one build of each per round, in the
+/// reverse order every other round, so that a phase of the machine's load falls on all
+/// builders alike rather than on whichever built during it (as the methods' timed runs go
+/// round-robin). Built one after the other, raypack's builds and then Embree's, their medians
+/// had come from different minutes of a shared machine.
+fn build_rounds(builds: &mut [Rebuilds<'_>], rounds: usize) -> Result<(), BenchError> {
+    let n = builds.len();
+    for round in 0..rounds {
+        for j in 0..n {
+            let b = &mut builds[if round % 2 == 1 { n - 1 - j } else { j }];
+            let time = (b.again)()?;
+            b.times.push(time);
+        }
+    }
+    Ok(())
+}
+
 /// One of raypack's trees to time: the scene built at one quality, and its build figures.
 pub struct RaypackTree {
     /// The build quality, as in `--quality` (e.g. `medium`).
@@ -289,10 +314,16 @@ pub struct RaypackTree {
 /// by the caller (timed there); the first makes the ray sets and the reference checksums, and
 /// when there are several, each tree's method names end in its quality in brackets, as
 /// Embree's do. `log` receives progress lines.
+///
+/// With `rebuild` (which builds tree `k` again and returns the build's time, the freeing of
+/// what it built not included), each tree is built `settings.build_runs - 1` more times,
+/// round-robin with Embree's builds, and its figures are those of all its builds; without,
+/// its figures are the caller's.
 pub fn run_bench(
     name: &str,
     trees: &mut [RaypackTree],
     settings: &BenchSettings,
+    rebuild: Option<&dyn Fn(usize) -> Duration>,
     log: &mut dyn FnMut(&str),
 ) -> Result<BenchReport, BenchError> {
     assert!(!trees.is_empty(), "run_bench needs a tree");
@@ -331,7 +362,7 @@ pub fn run_bench(
 
     #[cfg(feature = "embree")]
     let embree_scenes = if settings.against_embree {
-        use raypack::embree::{EmbreeQuality, EmbreeScene, EmbreeWidth};
+        use raypack::embree::{EmbreeQuality, EmbreeScene};
         let mut v = Vec::new();
         for q in [EmbreeQuality::Medium, EmbreeQuality::High] {
             log(&format!("building Embree BVH ({})", q.name()));
@@ -341,16 +372,50 @@ pub fn run_bench(
                 robust: settings.embree_robust,
                 ..Default::default()
             };
-            let mut e = EmbreeScene::with_options(scene, options)?;
-            let mut times = vec![e.build_time()];
-            for _ in 1..settings.build_runs.max(1) {
-                e = EmbreeScene::with_options(scene, options)?;
-                times.push(e.build_time());
-            }
-            report.build.push(BuildFigures::from_times("embree", q.name().to_string(), &times, e.bvh_bytes()));
-            v.push(e);
+            v.push(EmbreeScene::with_options(scene, options)?);
         }
-        let e = &v[0];
+        v
+    } else {
+        Vec::new()
+    };
+
+    // Each structure's builds after its first, in rounds (see `build_rounds`).
+    let mut builds: Vec<Rebuilds<'_>> = Vec::new();
+    if let Some(rebuild) = rebuild {
+        for (k, t) in trees.iter().enumerate() {
+            let first = Duration::from_secs_f64(t.build.seconds);
+            builds.push(Rebuilds {
+                figures: t.build.clone(),
+                times: vec![first],
+                again: Box::new(move || Ok(rebuild(k))),
+            });
+        }
+    }
+    let first_embree = builds.len();
+    #[cfg(feature = "embree")]
+    for e in &embree_scenes {
+        let options = e.options();
+        let figures =
+            BuildFigures::from_times("embree", options.quality.name().to_string(), &[e.build_time()], e.bvh_bytes());
+        let again = move || Ok(raypack::embree::EmbreeScene::with_options(scene, options)?.build_time());
+        builds.push(Rebuilds { figures, times: vec![e.build_time()], again: Box::new(again) });
+    }
+    if settings.build_runs > 1 && !builds.is_empty() {
+        log(&format!("{} more builds of each structure, round-robin", settings.build_runs - 1));
+    }
+    build_rounds(&mut builds, settings.build_runs.max(1) - 1)?;
+    for (j, b) in builds.iter().enumerate() {
+        let f = BuildFigures::from_times(b.figures.tracer, b.figures.quality.clone(), &b.times, b.figures.bytes);
+        if j < first_embree {
+            report.build[j] = f;
+        } else {
+            report.build.push(f);
+        }
+    }
+
+    #[cfg(feature = "embree")]
+    if let Some(e) = embree_scenes.first() {
+        use raypack::embree::EmbreeWidth;
         let isa = if e.native_packets(EmbreeWidth::W16) {
             "avx512"
         } else if !e.native_packets(EmbreeWidth::W8) {
@@ -369,10 +434,7 @@ pub fn run_bench(
             if e.native_packets(EmbreeWidth::W8) { "yes" } else { "no (emulated)" },
             if e.native_packets(EmbreeWidth::W16) { "yes" } else { "no (emulated)" },
         ));
-        v
-    } else {
-        Vec::new()
-    };
+    }
 
     #[cfg_attr(not(feature = "embree"), allow(unused_mut))]
     let mut methods = Vec::new();
@@ -798,21 +860,9 @@ impl BenchReport {
     }
 }
 
-/// Builds `builder` with `opts` `--build-runs` times (or loads it from `--bvh-cache`), keeping
-/// the last; returns the scene and its build figures.
+/// Builds `builder` with `opts` once, timed (or loads it from `--bvh-cache`); returns the
+/// scene and its build figures. [`rebuild_time`] times the builds after it.
 fn build_timed(builder: &SceneBuilder, opts: &BuildOptions, a: &BenchArgs) -> Result<(Scene, BuildFigures), CliError> {
-    // The builds beyond the one kept (not with a BVH cache, whose second "build" is a load).
-    let extra_builds = if a.bvh_cache.is_some() { 0 } else { a.build_runs - 1 };
-    let mut build_times = Vec::with_capacity(a.build_runs);
-    for _ in 0..extra_builds {
-        let b = builder.clone();
-        let t = Instant::now();
-        let built = b.commit(opts);
-        build_times.push(t.elapsed());
-        // Freed outside the timed region, as Embree's scenes are (their build time is
-        // `rtcCommitScene` alone): unmapping a large scene's arrays took tens of milliseconds.
-        drop(built);
-    }
     let b = builder.clone();
     let t = Instant::now();
     let (scene, report) = match a.bvh_cache.as_deref() {
@@ -828,7 +878,7 @@ fn build_timed(builder: &SceneBuilder, opts: &BuildOptions, a: &BenchArgs) -> Re
             (scene, report)
         }
     };
-    build_times.push(t.elapsed());
+    let time = t.elapsed();
     if report.dropped() > 0 {
         eprintln!("[raypack] warning: {report}");
     }
@@ -836,10 +886,22 @@ fn build_timed(builder: &SceneBuilder, opts: &BuildOptions, a: &BenchArgs) -> Re
     let build = BuildFigures::from_times(
         "raypack",
         format!("bvh8 {quality} {}", scene.triangle_test().name()),
-        &build_times,
+        &[time],
         raypack_accel_bytes(&scene) as u64,
     );
     Ok((scene, build))
+}
+
+/// The time of one more build of `builder` with `opts`. What it built is freed outside the
+/// timed region, as Embree's scenes are (their build time is `rtcCommitScene` alone):
+/// unmapping a large scene's arrays took tens of milliseconds.
+fn rebuild_time(builder: &SceneBuilder, opts: &BuildOptions) -> Duration {
+    let b = builder.clone();
+    let t = Instant::now();
+    let built = b.commit(opts);
+    let time = t.elapsed();
+    drop(built);
+    time
 }
 
 /// `raypack bench`: checks the settings and the memory, builds the scene, runs [`run_bench`] and
@@ -882,6 +944,7 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     let (builder, warnings) = load(scene_path, a.max_primitives)?;
     print_warnings(&warnings);
     let mut trees = Vec::new();
+    let mut tree_opts = Vec::new();
     for (k, &q) in a.qualities().iter().enumerate() {
         let quality: BuildQuality = q.into();
         // The first tree's binary BVH stays for the reference rows and the checksums they
@@ -890,10 +953,14 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
         let (scene, build) = build_timed(&builder, &opts, &a)?;
         let name = format!("{quality:?}").to_lowercase();
         trees.push(RaypackTree { quality: name, scene, build });
+        tree_opts.push(opts);
     }
     settings.ray_sets = crate::rays::ray_sets(&a, &trees[0].scene, &settings)?;
     let name = scene_path.map_or(crate::BUILT_IN_SCENE.to_string(), |p| p.display().to_string());
-    let out = run_bench(&name, &mut trees, &settings, &mut |line| eprintln!("[raypack] {line}"))?;
+    // No more builds from a BVH cache: its second "build" would be a load.
+    let rebuild = |k: usize| rebuild_time(&builder, &tree_opts[k]);
+    let rebuild: Option<&dyn Fn(usize) -> Duration> = if a.bvh_cache.is_none() { Some(&rebuild) } else { None };
+    let out = run_bench(&name, &mut trees, &settings, rebuild, &mut |line| eprintln!("[raypack] {line}"))?;
     match a.json.as_deref() {
         Some(p) if p == Path::new("-") => println!("{:#}", out.json()),
         Some(p) => {
@@ -934,7 +1001,7 @@ mod tests {
         let build = BuildFigures::from_times("raypack", "medium".into(), &[Duration::ZERO], 0);
         let settings = BenchSettings { width: 32, height: 24, runs: 1, threads: vec![1, 2], ..Default::default() };
         let mut trees = [RaypackTree { quality: "medium".into(), scene, build }];
-        let report = run_bench("sphere", &mut trees, &settings, &mut |_| {}).unwrap();
+        let report = run_bench("sphere", &mut trees, &settings, None, &mut |_| {}).unwrap();
         let scene = &trees[0].scene;
         // 3 sets x 2 thread counts x the kernels of the matching query.
         let per_query = |occ: bool| KERNELS.iter().filter(move |k| k.is_occlusion() == occ);
@@ -959,7 +1026,7 @@ mod tests {
             trees.push(RaypackTree { quality: name.into(), scene, build });
         }
         let settings = BenchSettings { width: 32, height: 24, runs: 1, threads: vec![1], ..Default::default() };
-        let report = run_bench("sphere", &mut trees, &settings, &mut |_| {}).unwrap();
+        let report = run_bench("sphere", &mut trees, &settings, None, &mut |_| {}).unwrap();
         let simd = KERNELS.iter().filter(|k| k.simd).count();
         let per_set = |occ: bool| KERNELS.iter().filter(|k| k.is_occlusion() == occ).count();
         let simd_per_set = |occ: bool| KERNELS.iter().filter(|k| k.simd && k.is_occlusion() == occ).count();
@@ -974,6 +1041,42 @@ mod tests {
         assert_eq!(report.rows.iter().filter(|r| r.method.contains("reference") && r.rays == "primary").count(), 1);
         assert_eq!(report.build.len(), 2);
         assert!(report.build_line().unwrap().contains("raypack bvh8 high"));
+    }
+
+    #[test]
+    fn more_builds_go_round_robin_and_count_in_the_figures() {
+        let mut trees = Vec::new();
+        for (name, ms) in [("medium", 10), ("high", 40)] {
+            let scene = sphere_scene(&BuildOptions::default());
+            let build = BuildFigures::from_times("raypack", format!("bvh8 {name}"), &[Duration::from_millis(ms)], 7);
+            trees.push(RaypackTree { quality: name.into(), scene, build });
+        }
+        // Tree k's builds after the first take 1 + 2k ms (medium) or 30 + k ms (high).
+        let calls = std::cell::RefCell::new(Vec::new());
+        let rebuild = |k: usize| {
+            let mut c = calls.borrow_mut();
+            c.push(k);
+            let n = c.iter().filter(|&&j| j == k).count() as u64;
+            Duration::from_millis(if k == 0 { 1 + 2 * n } else { 30 + n })
+        };
+        let settings = BenchSettings {
+            width: 8,
+            height: 6,
+            runs: 1,
+            threads: vec![1],
+            build_runs: 4,
+            methods: vec!["Scene::intersect1".into()],
+            ..Default::default()
+        };
+        let report = run_bench("sphere", &mut trees, &settings, Some(&rebuild), &mut |_| {}).unwrap();
+        // Three rounds, every other one reversed.
+        assert_eq!(*calls.borrow(), [0, 1, 1, 0, 0, 1]);
+        let (m, h) = (&report.build[0], &report.build[1]);
+        assert_eq!((m.runs, h.runs), (4, 4));
+        // Medium: 10, 3, 5, 7 ms; high: 40, 31, 32, 33 ms.
+        assert_eq!((m.seconds_range, h.seconds_range), ((0.003, 0.010), (0.031, 0.040)));
+        assert_eq!((m.seconds, h.seconds), (0.007, 0.033));
+        assert_eq!((m.quality.as_str(), m.bytes), ("bvh8 medium", 7));
     }
 
     fn row(rays: &'static str, threads: usize, tracer: &'static str, method: &str, mrays: [f64; 3]) -> BenchRow {
@@ -997,7 +1100,7 @@ mod tests {
         let build = BuildFigures::from_times("raypack", "medium".into(), &[Duration::ZERO], 0);
         let settings = BenchSettings { width: 4, height: 4, runs: 1, threads: vec![1], ..Default::default() };
         let mut trees = [RaypackTree { quality: "medium".into(), scene, build }];
-        let mut report = run_bench("empty", &mut trees, &settings, &mut |_| {}).unwrap();
+        let mut report = run_bench("empty", &mut trees, &settings, None, &mut |_| {}).unwrap();
         let mut wrong = row("primary", 1, "raypack", "wrong", [90.0, 100.0, 110.0]);
         wrong.checksum_differs = true;
         report.rows = vec![
@@ -1089,7 +1192,7 @@ mod tests {
             ..Default::default()
         };
         let mut trees = [RaypackTree { quality: "medium".into(), scene, build }];
-        let report = run_bench("sphere", &mut trees, &settings, &mut |_| {}).unwrap();
+        let report = run_bench("sphere", &mut trees, &settings, None, &mut |_| {}).unwrap();
         assert!(report.notes.iter().any(|n| n.contains("RTC_SCENE_FLAG_ROBUST")), "{:?}", report.notes);
         let embree: Vec<_> = report.rows.iter().filter(|r| r.tracer == "embree").collect();
         assert!(embree.len() >= 6, "Embree's calls on the three sets");
@@ -1103,7 +1206,7 @@ mod tests {
         let build = BuildFigures::from_times("raypack", "medium".into(), &[Duration::ZERO], 0);
         let settings = BenchSettings { against_embree: true, ..Default::default() };
         let mut trees = [RaypackTree { quality: "medium".into(), scene, build }];
-        let err = run_bench("empty", &mut trees, &settings, &mut |_| {}).unwrap_err();
+        let err = run_bench("empty", &mut trees, &settings, None, &mut |_| {}).unwrap_err();
         assert!(matches!(err, BenchError::EmbreeNotBuilt));
         assert!(err.to_string().contains("--features embree"));
     }
