@@ -152,6 +152,22 @@ fn soups_over_leaf_sizes_and_block_widths() {
     assert!(total >= 100_000);
 }
 
+/// The single-ray closest-hit query speculates its descents only in small trees; the large
+/// tree's form answers like the reference too, on every tier.
+#[test]
+fn large_trees_trace_without_speculation_like_the_reference() {
+    use raypack::bvh::queries::SPECULATION_MAX_BYTES;
+    let small = scene_of(&[&random_soup(3000, 0.08, 11)], &[], &BuildOptions::default());
+    assert!(small.bvh8().speculates());
+    let soup = random_soup(120_000, 0.02, 12);
+    let scene = scene_of(&[&soup], &[], &BuildOptions::default());
+    assert!(scene.bvh8().bytes() > SPECULATION_MAX_BYTES, "{} bytes", scene.bvh8().bytes());
+    assert!(!scene.bvh8().speculates());
+    let rays = random_rays(&scene, 20_000, 12);
+    let hits = check_kernels(&scene, &rays, "large soup");
+    assert!(hits > rays.len() / 20, "too few hits ({hits})");
+}
+
 #[test]
 fn shared_edges_spheres_and_coherent_rays() {
     let g = grid(60, 60).map_positions(|p| p + Vec3::new(0.0, 0.0, -0.5));

@@ -51,6 +51,20 @@ macro_rules! with_kernel {
     };
 }
 
+/// The single-ray closest-hit query speculates its descents (`traverse1::speculated_slot`)
+/// in BVH8s of at most this many bytes ([`Bvh8::speculates`]), not in larger ones.
+///
+/// A guess pays where the branch predictor has seen the rays' paths: in small trees, and on
+/// camera rays. On the diffuse rays of larger trees the guesses fail at the deep levels, and
+/// each wrong one costs a flush and starts a load the ray does not need. The bound is a
+/// property of the tree, not of the machine, and hits are the same bit for bit either way.
+/// Measured on an Intel Xeon (Emerald Rapids, AVX2, diffuse rays, `Scene::intersect1` over
+/// `rtcIntersect1`, with and without speculation): better with it on the CS184 beetle (0.4
+/// MB), level on the CS184 building (2.2 MB), worse by 4-13% on every mesh from 2.7 MB (the
+/// 48k-triangle Stanford dragon) to 111 MB (a 2M-triangle knot); PERFORMANCE.md, "Descent
+/// slots as predicted branches".
+pub const SPECULATION_MAX_BYTES: usize = 2 << 20;
+
 struct Intersect1<'a, T: TriBlock, C> {
     bvh: &'a Bvh8<T>,
     ray: &'a Ray,
@@ -64,7 +78,12 @@ impl<T: TriBlock, C: Counter> IsaOp for Intersect1<'_, T, C> {
         let mut hit = Hit::MISS;
         if self.ray.is_valid() {
             let (bvh, r, mut tfar) = (self.bvh.slices(), Ray1::<I::F8>::new(self.ray), self.ray.tfar);
-            with_kernel!(bvh.test, P => bvh.intersect1_from::<I, P, C, true>(&r, bvh.root(), &mut tfar, &mut hit, self.counter));
+            let root = bvh.root();
+            if self.bvh.speculates() {
+                with_kernel!(bvh.test, P => bvh.intersect1_from::<I, P, C, true>(&r, root, &mut tfar, &mut hit, self.counter));
+            } else {
+                with_kernel!(bvh.test, P => bvh.intersect1_from::<I, P, C, false>(&r, root, &mut tfar, &mut hit, self.counter));
+            }
         }
         hit
     }
@@ -547,6 +566,12 @@ impl<T: TriBlock> Bvh8<T> {
                 );
             }
         }
+    }
+
+    /// True when the single-ray closest-hit query speculates its descents: in trees of at
+    /// most [`SPECULATION_MAX_BYTES`].
+    pub fn speculates(&self) -> bool {
+        self.bytes() <= SPECULATION_MAX_BYTES
     }
 
     /// True when the streams interleave the single rays of incoherent packets

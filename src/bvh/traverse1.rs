@@ -255,7 +255,8 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
     /// Sphere hits carry `u = v = 0`; the scene fills in their surface coordinates.
     ///
     /// `SPECULATE` takes each descent's slot through predicted branches (`speculated_slot`).
-    /// The single-ray queries set it; the packet kernels' fallback does not: its rays enter
+    /// The single-ray query sets it in small trees
+    /// ([`crate::bvh::queries::SPECULATION_MAX_BYTES`]); the packet kernels' fallback does not: its rays enter
     /// subtrees part-way down, one after the other, where the branch history does not tell
     /// the slot, and the streams were 2-3% slower with it (PERFORMANCE.md, "Descent slots as
     /// predicted branches").

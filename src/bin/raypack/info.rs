@@ -80,6 +80,9 @@ pub struct BuildInfo {
     /// True when the streams trace incoherent packets as interleaved single rays (the BVH8
     /// is larger than the last-level cache, [`raypack::bvh::Bvh8::interleaves`]).
     pub interleaves: bool,
+    /// True when the single-ray closest-hit query speculates its descents (a small BVH8,
+    /// [`raypack::bvh::Bvh8::speculates`]).
+    pub speculates: bool,
 }
 
 /// Figures of one Embree build over the same triangles (`raypack info --against embree`).
@@ -222,6 +225,7 @@ pub fn scene_info(path: Option<&Path>, opts: &InfoOptions) -> Result<SceneInfo, 
             valid,
             peak_added_bytes,
             interleaves: scene.bvh8().interleaves(),
+            speculates: scene.bvh8().speculates(),
         });
         if last && opts.against_embree && !opts.embree_first {
             info.embree_builds = embree_builds(&scene.triangles, scene.num_spheres(), opts.isa)?;
@@ -341,6 +345,12 @@ impl SceneInfo {
             } else {
                 writeln!(s, "  streams    16-ray packets (bvh8 within the {llc} last-level cache)")
             };
+            let most = mb(raypack::bvh::queries::SPECULATION_MAX_BYTES);
+            let _ = if bi.speculates {
+                writeln!(s, "  single     closest-hit descents speculated (bvh8 within {most})")
+            } else {
+                writeln!(s, "  single     closest-hit descents not speculated (bvh8 larger than {most})")
+            };
             match &bi.valid {
                 Some(Ok(())) => {
                     let _ = writeln!(s, "  validate   ok");
@@ -403,6 +413,7 @@ impl SceneInfo {
                     "valid": bi.valid.as_ref().map(|v| v.clone().err().unwrap_or_else(|| "ok".into())),
                     "peak_added_bytes": bi.peak_added_bytes,
                     "streams_interleave": bi.interleaves,
+                    "single_ray_speculates": bi.speculates,
                 })
             })
             .collect();
