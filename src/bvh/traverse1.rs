@@ -256,10 +256,10 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
     ///
     /// `SPECULATE` takes each descent's slot through predicted branches (`speculated_slot`).
     /// The single-ray query sets it in small trees
-    /// ([`crate::bvh::queries::SPECULATION_MAX_BYTES`]); the packet kernels' fallback does not: its rays enter
-    /// subtrees part-way down, one after the other, where the branch history does not tell
-    /// the slot, and the streams were 2-3% slower with it (PERFORMANCE.md, "Descent slots as
-    /// predicted branches").
+    /// ([`crate::bvh::queries::SPECULATION_MAX_BYTES`]); the packet kernels' fallback does
+    /// not: its rays enter subtrees part-way down, one after the other, where the branch
+    /// history does not tell the slot, and the streams were 2-3% slower with it
+    /// (PERFORMANCE.md, "Descent slots as predicted branches").
     #[inline(always)]
     pub fn intersect1_from<I: IsaLanes, P: TriangleKernel, C: Counter, const SPECULATE: bool>(
         &self,

@@ -173,8 +173,8 @@ pub trait IsaLanes: Copy + Send + Sync + 'static {
     const INCOHERENT_THRESHOLD_16: usize;
     /// Whether the single-ray kernels take the slot they descend to through predicted
     /// branches ([`crate::bvh::traverse1`]; the closest-hit query only in small trees,
-    /// [`crate::bvh::queries::SPECULATION_MAX_BYTES`]). Not on the baseline tier, where a crate that
-    /// depends on raypack got less of the gain than the project's own build
+    /// [`crate::bvh::queries::SPECULATION_MAX_BYTES`]). Not on the baseline tier, where a
+    /// crate that depends on raypack got less of the gain than the project's own build
     /// (PERFORMANCE.md, "Descent slots as predicted branches").
     const SPECULATE_DESCENT: bool;
 }
