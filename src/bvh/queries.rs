@@ -62,9 +62,9 @@ macro_rules! with_kernel {
 /// `rtcIntersect1`, with and without speculation): better with it on the CS184 beetle (0.4
 /// MB), level on the CS184 building (2.2 MB), worse by 5-14% on every one of eleven meshes
 /// from 2.7 MB (the 48k-triangle Stanford dragon) to 111 MB (a 2M-triangle knot), and by
-/// 10-30% on the 871k-triangle dragon at AVX-512; PERFORMANCE.md, "Descent slots as
-/// predicted branches".
-pub const SPECULATION_MAX_BYTES: usize = 2 << 20;
+/// 10-30% on the 871k-triangle dragon at AVX-512. The bound lies between the building and
+/// the small dragon; PERFORMANCE.md, "Descent slots as predicted branches".
+pub const SPECULATION_MAX_BYTES: usize = 5 << 19;
 
 struct Intersect1<'a, T: TriBlock, C> {
     bvh: &'a Bvh8<T>,
