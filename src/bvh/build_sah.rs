@@ -10,9 +10,10 @@
 //!
 //! The build is deterministic and parallel: every subtree of `n` primitives owns a reserved
 //! range of `2n - 1` node slots, so subtrees built on different threads never race for node
-//! indices, and a final pass compacts the slots in depth-first order. Binning of large nodes
-//! runs in parallel chunks whose reduction (min/max and integer counts) is exact, so the
-//! tree is bit-identical whatever the thread count.
+//! indices, and a final pass compacts the slots in depth-first order. Binning and
+//! partitioning of large nodes run in parallel chunks of fixed sizes whose reductions
+//! (min/max and integer counts) are exact, so the tree is bit-identical whatever the thread
+//! count.
 //!
 //! (One file past 600 lines: binning, split choice, partitioning and compaction are the steps
 //! of one algorithm over the same primitive, bin and slot types, read top to bottom.)
@@ -118,6 +119,10 @@ impl BuildOptions {
 const MAX_BINS: usize = 256;
 /// Nodes with more primitives than this bin in parallel chunks.
 const PARALLEL_BIN_THRESHOLD: usize = 1 << 16;
+/// Nodes with more primitives than this are partitioned in parallel
+/// ([`partition_with_info_par`]), in chunks of `PARALLEL_PARTITION_CHUNK`.
+const PARALLEL_PARTITION_THRESHOLD: usize = 1 << 18;
+const PARALLEL_PARTITION_CHUNK: usize = 1 << 16;
 /// Nodes of fewer primitives than this bin into one set of bins, not two ([`bin_prims`]).
 const SMALL_NODE: usize = 32;
 /// Subtrees with more primitives than this are built on another rayon task (4096 was
@@ -551,7 +556,7 @@ fn choose_split(
             let total = spatial::split_refs(sp, all, n, s.axis, s.pos);
             let prims = &mut all[..total];
             let pos2 = 2.0 * s.pos;
-            let mut split = partition_with_info(prims, |c2| c2[s.axis] < pos2);
+            let mut split = partition_node(prims, |c2| c2[s.axis] < pos2);
             if split.0 == 0 || split.0 == total {
                 split = median_split(prims, &PrimInfo::of(prims).centroids);
             }
@@ -564,7 +569,7 @@ fn choose_split(
     // `min(trunc(x), k-1) < s` is `x < s` for the integer `s <= k-1`: the same arithmetic
     // as binning, without the float-to-int conversion.
     let split = split_bin as f32;
-    let (mid, li, ri) = partition_with_info(prims, |c2| (c2[axis] - lo) * scale < split);
+    let (mid, li, ri) = partition_node(prims, |c2| (c2[axis] - lo) * scale < split);
     if mid == 0 || mid == n {
         // Cannot happen with exact arithmetic; guard against rounding anyway.
         return Some(with_total(median_split(prims, cb)));
@@ -751,7 +756,17 @@ fn with_infos(prims: &[BuildPrim], mid: usize) -> (usize, PrimInfo, PrimInfo) {
 }
 
 /// Moves the primitives whose doubled centroid satisfies `left` to the front, and finds both
-/// sides' [`PrimInfo`]; returns how many went left.
+/// sides' [`PrimInfo`]; returns how many went left. Large nodes are partitioned in parallel.
+fn partition_node(prims: &mut [BuildPrim], left: impl Fn(Vec4) -> bool + Sync) -> (usize, PrimInfo, PrimInfo) {
+    if prims.len() > PARALLEL_PARTITION_THRESHOLD {
+        partition_with_info_par(prims, left, PARALLEL_PARTITION_CHUNK)
+    } else {
+        partition_with_info(prims, left)
+    }
+}
+
+/// [`partition_node`] on one thread: [`partition_blocks`], each side's infos gathered from
+/// its blocks as they are finished, while they are in cache.
 //
 // The branchy one-pass partition that gathered the infos as it went mispredicted on every
 // other primitive of a mixed node. Blocks, then the infos in a second pass over the (cached)
@@ -759,11 +774,82 @@ fn with_infos(prims: &[BuildPrim], mid: usize) -> (usize, PrimInfo, PrimInfo) {
 // --build-runs 7`, three interleaved rounds, medians) 0.334 / 0.338 / 0.318 s -> 0.302 /
 // 0.306 / 0.298 s, AMD EPYC Zen 4. Gathering the infos in the classifying loop without
 // branches (a select per lane) was slower than either: 0.341 / 0.352 / 0.351 s. Blocks of
-// 16, 32 or 128: the same as 64.
+// 16, 32 or 128: the same as 64. The infos of each finished block instead of the second
+// pass, which for nodes larger than the caches was one more pass over memory: the 2M knot's
+// partitions of nodes above 2^18 primitives, summed over 6 builds on 2 threads (Intel Xeon
+// model 207, a timer around this call, three rounds) 356 / 351 / 322 ms -> 271 / 268 / 268 ms.
 #[inline]
 fn partition_with_info(prims: &mut [BuildPrim], left: impl Fn(Vec4) -> bool) -> (usize, PrimInfo, PrimInfo) {
-    let mid = partition_blocks(prims, |p| left(p.centroid2()));
-    with_infos(prims, mid)
+    let (mut li, mut ri) = (PrimInfo::EMPTY, PrimInfo::EMPTY);
+    let finished = |done: &[BuildPrim], on_left: bool| {
+        let info = if on_left { &mut li } else { &mut ri };
+        for p in done {
+            info.add(p, p.centroid2());
+        }
+    };
+    let mid = partition_blocks(prims, |p| left(p.centroid2()), finished);
+    (mid, li, ri)
+}
+
+/// [`partition_node`] in parallel: fixed chunks of `chunk` primitives are partitioned on
+/// their own ([`partition_with_info`]), then the chunks' right parts that lie before the
+/// final boundary trade places with their left parts that lie after it, in pieces swapped in
+/// parallel. The chunks do not depend on the thread count, so neither does the order of
+/// the primitives.
+//
+// The 2M knot's root partition on 2 threads (Intel Xeon model 207): 17-20 ms -> 9 ms; its
+// binary build (`build_slots`), summed over 6 builds, three rounds, 2226 / 2210 / 1880 ms
+// before both changes, 2146 / 2149 / 2129 ms with the fused infos, 1976 / 2032 / 1919 ms with
+// this too. (Round-robin commits against Embree MEDIUM could not tell the 3%: ratios 0.97-1.04
+// before and 0.98-1.04 after, four rounds.)
+fn partition_with_info_par(
+    prims: &mut [BuildPrim],
+    left: impl Fn(Vec4) -> bool + Sync,
+    chunk: usize,
+) -> (usize, PrimInfo, PrimInfo) {
+    use rayon::prelude::*;
+    let parts: Vec<(usize, PrimInfo, PrimInfo)> =
+        prims.par_chunks_mut(chunk).map(|c| partition_with_info(c, &left)).collect();
+    let mid: usize = parts.iter().map(|p| p.0).sum();
+    let (li, ri) = parts.iter().fold((PrimInfo::EMPTY, PrimInfo::EMPTY), |(l, r), p| (l.merge(&p.1), r.merge(&p.2)));
+    // The misplaced ranges, in increasing order: right-side primitives before `mid`, and
+    // left-side ones from `mid` on (counted from `mid`). Both lists hold as many primitives.
+    let (mut wrong_left, mut wrong_right) = (Vec::new(), Vec::new());
+    for (c, p) in parts.iter().enumerate() {
+        let start = c * chunk;
+        let (split, end) = (start + p.0, (start + chunk).min(prims.len()));
+        if split < mid {
+            wrong_left.push(split..end.min(mid));
+        }
+        if split > mid {
+            wrong_right.push(start.max(mid) - mid..split - mid);
+        }
+    }
+    // Pairs of equal-length pieces (at most SWAP_PIECE, for balance), cut from both sides
+    // in increasing order so that every piece is a disjoint slice.
+    const SWAP_PIECE: usize = 1 << 14;
+    let (mut before, mut after) = prims.split_at_mut(mid);
+    let (mut before_at, mut after_at) = (0, 0);
+    let mut swaps: Vec<(&mut [BuildPrim], &mut [BuildPrim])> = Vec::new();
+    let (mut a, mut b) = (wrong_left.into_iter().peekable(), wrong_right.into_iter().peekable());
+    while let (Some(ra), Some(rb)) = (a.peek_mut(), b.peek_mut()) {
+        let len = ra.len().min(rb.len()).min(SWAP_PIECE);
+        let (x, rest) = std::mem::take(&mut before)[ra.start - before_at..].split_at_mut(len);
+        (before, before_at) = (rest, ra.start + len);
+        let (y, rest) = std::mem::take(&mut after)[rb.start - after_at..].split_at_mut(len);
+        (after, after_at) = (rest, rb.start + len);
+        swaps.push((x, y));
+        ra.start += len;
+        rb.start += len;
+        if ra.start == ra.end {
+            a.next();
+        }
+        if rb.start == rb.end {
+            b.next();
+        }
+    }
+    swaps.into_par_iter().for_each(|(x, y)| x.swap_with_slice(y));
+    (mid, li, ri)
 }
 
 /// [`partition`] in blocks, as BlockQuicksort does (Edelkamp and Weiß, "BlockQuicksort:
@@ -771,8 +857,14 @@ fn partition_with_info(prims: &mut [BuildPrim], left: impl Fn(Vec4) -> bool) -> 
 /// classified without branches, recording where the elements on the wrong side are, and
 /// those are then swapped pairwise. Whatever is left between the blocks (all of a node of
 /// fewer than two blocks) is partitioned by [`partition_lomuto`], also without branches.
+/// `finished(slice, on_left)` sees every primitive once, in slices that are already on
+/// their final side.
 #[inline]
-fn partition_blocks(prims: &mut [BuildPrim], pred: impl Fn(&BuildPrim) -> bool) -> usize {
+fn partition_blocks(
+    prims: &mut [BuildPrim],
+    pred: impl Fn(&BuildPrim) -> bool,
+    mut finished: impl FnMut(&[BuildPrim], bool),
+) -> usize {
     const BLOCK: usize = 64;
     let (mut l, mut r) = (0, prims.len());
     // Offsets into the left block `[l, l + BLOCK)` of elements that belong right, and into
@@ -802,15 +894,20 @@ fn partition_blocks(prims: &mut [BuildPrim], pred: impl Fn(&BuildPrim) -> bool) 
         }
         (sl, sr) = (sl + m, sr + m);
         if sl == nl {
+            finished(&prims[l..l + BLOCK], true);
             l += BLOCK;
         }
         if sr == nr {
+            finished(&prims[r - BLOCK..r], false);
             r -= BLOCK;
         }
     }
     // A block with unswapped elements stays inside `[l, r)`, fewer than 2 * BLOCK
     // elements: finish them without branches too.
-    l + partition_lomuto(&mut prims[l..r], pred)
+    let m = partition_lomuto(&mut prims[l..r], pred);
+    finished(&prims[l..l + m], true);
+    finished(&prims[l + m..r], false);
+    l + m
 }
 
 /// [`partition`] without data-dependent branches: Lomuto's scheme, each element swapped
@@ -969,6 +1066,36 @@ mod tests {
     }
 
     #[test]
+    fn parallel_partition_splits_like_the_serial_one() {
+        // Chunks of 64 (instead of 65536) so that small inputs have many chunks, partial last
+        // chunks, chunks all on one side and boundaries inside or between chunks.
+        let mut rng = Rng::new(7, 11);
+        for len in (1..200).chain([640, 1000, 4097, 20000]) {
+            let mut prims: Vec<BuildPrim> = (0..len as u32)
+                .map(|id| {
+                    let c = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+                    BuildPrim::new(Aabb::new(c, c + Vec3::splat(rng.next_f32() * 0.01)), id)
+                })
+                .collect();
+            let mut serial = prims.clone();
+            let cut = 2.0 * rng.next_f32();
+            let left = |c2: Vec4| c2.x < cut;
+            let (mid, li, ri) = partition_with_info_par(&mut prims, left, 64);
+            let (want, wl, wr) = partition_with_info(&mut serial, left);
+            assert_eq!(mid, want, "len {len}");
+            assert!(prims[..mid].iter().all(|p| left(p.centroid2())), "len {len}");
+            assert!(!prims[mid..].iter().any(|p| left(p.centroid2())), "len {len}");
+            let mut ids: Vec<u32> = prims.iter().map(|p| p.id()).collect();
+            ids.sort_unstable();
+            assert_eq!(ids, (0..len as u32).collect::<Vec<_>>(), "len {len}");
+            for (got, want) in [(li, wl), (ri, wr)] {
+                assert_eq!(got.bounds.aabb(), want.bounds.aabb(), "len {len}");
+                assert_eq!(got.centroids.aabb(), want.centroids.aabb(), "len {len}");
+            }
+        }
+    }
+
+    #[test]
     fn block_partition_splits_like_the_plain_one() {
         // Below two blocks (128 elements) this is `partition_lomuto` alone; above, the
         // blocks and then `partition_lomuto` on the rest.
@@ -986,7 +1113,7 @@ mod tests {
                     .collect();
                 let mut plain = prims.clone();
                 let pred = |p: &BuildPrim| p.lower.x < 0.0;
-                let mid = partition_blocks(&mut prims, pred);
+                let mid = partition_blocks(&mut prims, pred, |_, _| {});
                 assert_eq!(mid, partition(&mut plain, pred), "len {len}");
                 assert!(prims[..mid].iter().all(pred) && !prims[mid..].iter().any(pred), "len {len}");
                 let ids = |v: &[BuildPrim]| {
