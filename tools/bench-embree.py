@@ -15,7 +15,8 @@ of a shared machine falls on one run of each, and each run times both tracers ro
 
 Per ISA, scene and thread count the table gives, as the median (lowest-highest) of the rounds:
 the best raypack method over the best Embree call on camera, diffuse and shadow rays, each
-tracer on its faster tree; `Scene::intersect1` over `rtcIntersect1` on diffuse rays, each on
+tracer on its faster tree (each report's own summary, so a set whose hits disagree is left out
+as the bench leaves it out); `Scene::intersect1` over `rtcIntersect1` on diffuse rays, each on
 its faster tree (the issue's single-ray figure) and Medium over MEDIUM alone; and the build
 line, raypack Medium's commit over Embree MEDIUM's. Both sides get the same choice of trees:
 one raypack tree against the better of Embree's two would count Embree's luckier tree in
@@ -60,32 +61,28 @@ def base_name(method):
 
 
 def round_ratios(report):
-    """Per (threads, key) the ratio of one report, `key` being a ray set, `single` (the
-    single-ray calls on each tracer's faster tree), `single-medium` (Medium over MEDIUM) or
-    `build` (raypack Medium's commit over Embree MEDIUM's, threads 0)."""
-    out = {}
-    results = [r for r in report["results"] if "reference" not in r["method"]]
-    threads = sorted({r["threads"] for r in results})
-    for t in threads:
-        rows = [r for r in results if r["threads"] == t]
-        for rays in RAY_SETS:
-            rp = [r["mrays_per_s"] for r in rows if r["rays"] == rays and r["tracer"] == "raypack"]
-            em = [r["mrays_per_s"] for r in rows if r["rays"] == rays and r["tracer"] == "embree"]
-            if rp and em:
-                out[(t, rays)] = max(rp) / max(em)
-        diffuse = [r for r in rows if r["rays"] == "diffuse"]
+    """Per (threads, key) the ratio of one report, `key` being a ray set (the report's own
+    summary: its best raypack method over its best Embree call, which the bench leaves out
+    when their hits disagree), `single` (the single-ray calls on each tracer's faster tree),
+    `single-medium` (Medium over MEDIUM) or `build` (raypack Medium's commit over Embree
+    MEDIUM's, threads 0)."""
+    out = {(s["threads"], s["rays"]): s["ratio"] for s in report.get("summary", []) if s["rays"] in RAY_SETS}
+    builds = report.get("build", {}).values()
+    raypack_builds = [b for b in builds if b["tracer"] == "raypack"]
+    # With one raypack tree its methods carry no quality: the tree's build names it.
+    only = raypack_builds[0]["quality"].split()[1] if len(raypack_builds) == 1 else None
+    for t in sorted({r["threads"] for r in report["results"]}):
+        diffuse = [r for r in report["results"] if r["threads"] == t and r["rays"] == "diffuse"]
         single = {
-            tracer: {quality_of(r["method"]): r["mrays_per_s"] for r in diffuse if base_name(r["method"]) == name}
+            tracer: {quality_of(r["method"]) or only: r["mrays_per_s"] for r in diffuse if base_name(r["method"]) == name}
             for tracer, name in (("raypack", "Scene::intersect1"), ("embree", "rtcIntersect1"))
         }
         if single["raypack"] and single["embree"]:
             out[(t, "single")] = max(single["raypack"].values()) / max(single["embree"].values())
-            rp_medium = single["raypack"].get("medium", single["raypack"].get(None))
-            if rp_medium is not None and "medium" in single["embree"]:
-                out[(t, "single-medium")] = rp_medium / single["embree"]["medium"]
-    builds = report.get("build", {})
-    rp = [b["seconds"] for b in builds.values() if b["tracer"] == "raypack" and " medium " in f" {b['quality']} "]
-    em = [b["seconds"] for b in builds.values() if b["tracer"] == "embree" and b["quality"] == "medium"]
+            if "medium" in single["raypack"] and "medium" in single["embree"]:
+                out[(t, "single-medium")] = single["raypack"]["medium"] / single["embree"]["medium"]
+    rp = [b["seconds"] for b in raypack_builds if b["quality"].split()[1:2] == ["medium"]]
+    em = [b["seconds"] for b in builds if b["tracer"] == "embree" and b["quality"] == "medium"]
     if rp and em:
         out[(0, "build")] = rp[0] / em[0]
     return out
