@@ -60,6 +60,12 @@ def base_name(method):
     return method[: method.rindex(" (")] if quality_of(method) else method
 
 
+def tree_quality(build):
+    """`medium` from a raypack build's `bvh8 medium moller-trumbore` (or a bare `medium`); None
+    when it names no build quality."""
+    return next((w for w in build["quality"].split() if w in ("fast", "medium", "high")), None)
+
+
 def round_ratios(report):
     """Per (threads, key) the ratio of one report, `key` being a ray set (the report's own
     summary: its best raypack method over its best Embree call, which the bench leaves out
@@ -70,7 +76,7 @@ def round_ratios(report):
     builds = report.get("build", {}).values()
     raypack_builds = [b for b in builds if b["tracer"] == "raypack"]
     # With one raypack tree its methods carry no quality: the tree's build names it.
-    only = raypack_builds[0]["quality"].split()[1] if len(raypack_builds) == 1 else None
+    only = tree_quality(raypack_builds[0]) if len(raypack_builds) == 1 else None
     for t in sorted({r["threads"] for r in report["results"]}):
         diffuse = [r for r in report["results"] if r["threads"] == t and r["rays"] == "diffuse"]
         single = {
@@ -81,7 +87,7 @@ def round_ratios(report):
             out[(t, "single")] = max(single["raypack"].values()) / max(single["embree"].values())
             if "medium" in single["raypack"] and "medium" in single["embree"]:
                 out[(t, "single-medium")] = single["raypack"]["medium"] / single["embree"]["medium"]
-    rp = [b["seconds"] for b in raypack_builds if b["quality"].split()[1:2] == ["medium"]]
+    rp = [b["seconds"] for b in raypack_builds if tree_quality(b) == "medium"]
     em = [b["seconds"] for b in builds if b["tracer"] == "embree" and b["quality"] == "medium"]
     if rp and em:
         out[(0, "build")] = rp[0] / em[0]
