@@ -52,7 +52,8 @@ macro_rules! with_kernel {
 }
 
 /// The single-ray closest-hit query speculates its descents (`traverse1::speculated_slot`)
-/// in BVH8s of at most this many bytes ([`Bvh8::speculates`]), not in larger ones.
+/// in BVH8s of at most this many bytes ([`Bvh8::speculates`]), not in larger ones; in the
+/// same small trees it does not prefetch the children it will visit (they sit in the cache).
 ///
 /// A guess pays where the branch predictor has seen the rays' paths: in small trees, and on
 /// camera rays. On the diffuse rays of larger trees the guesses fail at the deep levels, and

@@ -254,12 +254,14 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
     /// closer hits are found; the packet kernels' single-ray fallback enters here too.
     /// Sphere hits carry `u = v = 0`; the scene fills in their surface coordinates.
     ///
-    /// `SPECULATE` takes each descent's slot through predicted branches (`speculated_slot`).
+    /// `SPECULATE` takes each descent's slot through predicted branches (`speculated_slot`)
+    /// and skips the prefetches of hit children, which a tree this small holds in the cache.
     /// The single-ray query sets it in small trees
     /// ([`crate::bvh::queries::SPECULATION_MAX_BYTES`]); the packet kernels' fallback does
     /// not: its rays enter subtrees part-way down, one after the other, where the branch
     /// history does not tell the slot, and the streams were 2-3% slower with it
-    /// (PERFORMANCE.md, "Descent slots as predicted branches").
+    /// (PERFORMANCE.md, "Descent slots as predicted branches"; the prefetches: "Hit children
+    /// not prefetched in small trees").
     #[inline(always)]
     pub fn intersect1_from<I: IsaLanes, P: TriangleKernel, C: Counter, const SPECULATE: bool>(
         &self,
@@ -295,14 +297,17 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                     }
                     let mut d = [0.0f32; 8];
                     dist.store(&mut d);
-                    // Two or more children will be visited: start fetching all of them now.
-                    let mut m = mask;
-                    while m != 0 {
-                        let i = m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        self.prefetch(node.children[i]);
+                    // Two or more children will be visited: start fetching all of them now,
+                    // unless the tree is small enough to sit in the cache (`SPECULATE`).
+                    if !SPECULATE {
+                        let mut m = mask;
+                        while m != 0 {
+                            let i = m.trailing_zeros() as usize;
+                            m &= m - 1;
+                            self.prefetch(node.children[i]);
+                        }
+                        self.prefetch(node.children[i0]);
                     }
-                    self.prefetch(node.children[i0]);
                     let i1 = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
                     if mask == 0 {
