@@ -260,8 +260,8 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
     /// ([`crate::bvh::queries::SPECULATION_MAX_BYTES`]); the packet kernels' fallback does
     /// not: its rays enter subtrees part-way down, one after the other, where the branch
     /// history does not tell the slot, and the streams were 2-3% slower with it
-    /// (PERFORMANCE.md, "Descent slots as predicted branches"; the prefetches: "Hit children
-    /// not prefetched in small trees").
+    /// (PERFORMANCE.md, "Descent slots as predicted branches"; the prefetches: "Fewer
+    /// instructions per ray in small trees").
     #[inline(always)]
     pub fn intersect1_from<I: IsaLanes, P: TriangleKernel, C: Counter, const SPECULATE: bool>(
         &self,
