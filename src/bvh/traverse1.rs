@@ -277,8 +277,14 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
         let mut sp = 0usize;
         let pre = P::ray1::<T::Lanes<I>>(&r.ray);
         let tnear = T::Lanes::<I>::splat(r.ray.tnear);
+        // The closest hit so far stays in the caller's memory (`black_box` hides where the
+        // reference points, so the compiler cannot keep its fields in registers): a hit writes
+        // it, and the block test, which needs every vector register, no longer saves and
+        // restores `t`, `u` and `v` around each block. `tfar` stays in a register: in memory
+        // too it saved 3 more instructions per ray but cost 2-5% of the wall clock.
+        // Measured: PERFORMANCE.md, "Spills of the single-ray kernel".
         let mut tfar = *tfar_io;
-        let mut hit = *hit_io;
+        let hit = std::hint::black_box(hit_io);
         let mut cur = start;
         loop {
             'descend: {
@@ -356,12 +362,11 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                     }
                     cur = next_child(node, descent_slot::<I, SPECULATE>(near));
                 }
-                self.intersect_leaf1::<I, P, C>(cur, r, &pre, tnear, &mut tfar, &mut hit, counter);
+                self.intersect_leaf1::<I, P, C>(cur, r, &pre, tnear, &mut tfar, hit, counter);
             }
             loop {
                 if sp == 0 {
                     *tfar_io = tfar;
-                    *hit_io = hit;
                     return;
                 }
                 sp -= 1;
