@@ -57,15 +57,16 @@ pub fn moller_trumbore<V: Lanes>(
     e1: &Vec3x<V>,
     e2: &Vec3x<V>,
 ) -> (V, V, V, V) {
-    let lane_inputs = |i: usize| [origin.lane(i), v0.lane(i), e1.lane(i), e2.lane(i)];
-    moller_trumbore_with(origin, dir, tnear, tfar, v0, e1, e2, lane_inputs)
+    let redo =
+        |t, lanes, inv_det, e2: &Vec3x<V>, q: &Vec3x<V>| redo_t_f64(t, lanes, inv_det, |i| (e2.lane(i), q.lane(i)));
+    moller_trumbore_with(origin, dir, tnear, tfar, v0, e1, e2, redo)
 }
 
-/// [`moller_trumbore`], with the rare path that redoes an overflowing `t` in `f64` taking
-/// each lane's origin, `v0`, `e1` and `e2` from `lane_inputs` (the block kernel reads them from
-/// the block, which stays in memory) and recomputing `q` from them. Handed `e2` and `q` as
-/// lanes instead, that path kept both alive past the filter, and with sixteen registers the
-/// block test stored them to the stack on every block, rejected or not.
+/// [`moller_trumbore`] with the rare path that redoes an overflowing `t` in `f64` given as
+/// `redo(t, lanes, inv_det, e2, q)`. The block test ([`TriBlock::intersect1`]) reads `e2` from
+/// the block, which stays in memory, and recomputes `q` there: with `e2` and `q` alive past
+/// the filter for that path, the single-ray kernel, short of registers, stored both to the
+/// stack on every block, rejected or not. The packet kernels' broadcast test keeps the lanes.
 // Measured (callgrind, the CS184 beetle's diffuse rays at AVX2, `Scene::intersect1`): 899.1
 // -> 886.9 instructions per ray, the same hits; PERFORMANCE.md, "Spills of the single-ray
 // kernel".
@@ -79,7 +80,7 @@ pub(crate) fn moller_trumbore_with<V: Lanes>(
     v0: &Vec3x<V>,
     e1: &Vec3x<V>,
     e2: &Vec3x<V>,
-    lane_inputs: impl Fn(usize) -> [Vec3; 4],
+    redo: impl FnOnce(V, u32, V, &Vec3x<V>, &Vec3x<V>) -> V,
 ) -> (V, V, V, V) {
     const SLACK: f32 = 1.0 / 65536.0;
     const TINY_DET: f32 = 7.888_609e-31; // 2^-100
@@ -123,23 +124,21 @@ pub(crate) fn moller_trumbore_with<V: Lanes>(
     let overflow = (det_ok & inside & !t.is_finite()).bitmask();
     if overflow != 0 {
         // Rare: the dot product overflowed (origin ~1e13 or more away); redo it in f64.
-        t = redo_t_f64(t, overflow, inv_det, lane_inputs);
+        t = redo(t, overflow, inv_det, e2, &q);
     }
     let valid = det_ok & inside & t.gt(tnear) & t.le(tfar) & t.lt(V::splat(f32::INFINITY));
     (valid, t, u, v)
 }
 
-/// `t` with the lanes of `lanes` recomputed by [`crate::geometry::triangle::t_f64`], `q` lane
-/// by lane from `lane_inputs` (origin, `v0`, `e1`, `e2` of a lane).
+/// `t` with the lanes of `lanes` recomputed by [`crate::geometry::triangle::t_f64`] from
+/// each lane's `(e2, q)`.
 #[cold]
 #[inline(never)]
-fn redo_t_f64<V: Lanes>(t: V, lanes: u32, inv_det: V, lane_inputs: impl Fn(usize) -> [Vec3; 4]) -> V {
+fn redo_t_f64<V: Lanes>(t: V, lanes: u32, inv_det: V, e2_q: impl Fn(usize) -> (Vec3, Vec3)) -> V {
     let mut out = [0.0f32; 16];
     t.store(&mut out);
     for i in crate::simd::bits(lanes) {
-        let [origin, v0, e1, e2] = lane_inputs(i);
-        // The operations of `moller_trumbore`'s `q`, in its order: the same bits.
-        let q = (origin - v0).cross(e1);
+        let (e2, q) = e2_q(i);
         out[i] = crate::geometry::triangle::t_f64(e2, q, inv_det.lane(i));
     }
     V::load(&out)
@@ -199,12 +198,15 @@ pub trait TriBlock: bytemuck::Pod + Send + Sync + std::fmt::Debug + 'static {
     /// per lane (`V` must have M lanes).
     #[inline(always)]
     fn intersect1<V: Lanes>(&self, origin: &Vec3x<V>, dir: &Vec3x<V>, tnear: V, tfar: V) -> BlockHits<V> {
-        let lane_inputs = |i: usize| {
-            let [v0, e1, e2] = self.lane_rows(i);
-            [origin.lane(i), v0, e1, e2]
+        let redo = |t, lanes, inv_det, _: &Vec3x<V>, _: &Vec3x<V>| {
+            redo_t_f64(t, lanes, inv_det, |i| {
+                let [v0, e1, e2] = self.lane_rows(i);
+                // `moller_trumbore`'s operations for `q`, in its order: the same bits.
+                (e2, (origin.lane(i) - v0).cross(e1))
+            })
         };
         let (mask, t, u, v) =
-            moller_trumbore_with(origin, dir, tnear, tfar, &self.rows(0), &self.rows(1), &self.rows(2), lane_inputs);
+            moller_trumbore_with(origin, dir, tnear, tfar, &self.rows(0), &self.rows(1), &self.rows(2), redo);
         BlockHits { mask: mask.bitmask(), t, u, v }
     }
 
@@ -319,8 +321,7 @@ impl TriangleKernel for MollerTrumboreKernel {
     #[inline(always)]
     fn broadcast<V: Lanes>(rows: &[Vec3; 3], rays: &RayLanes<V>, tnear: V, tfar: V) -> (V, V, V, V) {
         let (v0, e1, e2) = (Vec3x::splat(rows[0]), Vec3x::splat(rows[1]), Vec3x::splat(rows[2]));
-        let lane_inputs = |i: usize| [rays.org.lane(i), rows[0], rows[1], rows[2]];
-        moller_trumbore_with(&rays.org, &rays.dir, tnear, tfar, &v0, &e1, &e2, lane_inputs)
+        moller_trumbore(&rays.org, &rays.dir, tnear, tfar, &v0, &e1, &e2)
     }
 
     #[inline]
