@@ -13,9 +13,9 @@
 //! [`TriangleKernel`], which knows the layout, its per-ray constants and its tests (one ray
 //! against a block, K rays against one triangle, and the scalar twin).
 //!
-//! One routine, [`moller_trumbore`], serves both directions of SIMD: one ray (broadcast)
-//! against the M triangles of a block, and K rays of a packet against one triangle
-//! (broadcast). It performs the scalar reference's operations in the scalar reference's
+//! One routine, [`moller_trumbore`] (its body `moller_trumbore_with`, which leaves the rare
+//! overflow path to the caller), serves both directions of SIMD: one ray (broadcast) against
+//! the M triangles of a block, and K rays of a packet against one triangle (broadcast). It performs the scalar reference's operations in the scalar reference's
 //! order with a true division, so every lane is bit-identical to
 //! [`intersect_triangle_edges`] — the scalar twin — and hit distances (and thus checksums)
 //! agree exactly with the reference BVH whatever order the traversal visits primitives in.
