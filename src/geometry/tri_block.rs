@@ -57,19 +57,22 @@ pub fn moller_trumbore<V: Lanes>(
     e1: &Vec3x<V>,
     e2: &Vec3x<V>,
 ) -> (V, V, V, V) {
-    let redo =
-        |t, lanes, inv_det, e2: &Vec3x<V>, q: &Vec3x<V>| redo_t_f64(t, lanes, inv_det, |i| (e2.lane(i), q.lane(i)));
+    let redo = |t, lanes, inv_det, e2: &Vec3x<V>, q: &Vec3x<V>, _: &Vec3x<V>| {
+        redo_t_f64(t, lanes, inv_det, |i| (e2.lane(i), q.lane(i)))
+    };
     moller_trumbore_with(origin, dir, tnear, tfar, v0, e1, e2, redo)
 }
 
 /// [`moller_trumbore`] with the rare path that redoes an overflowing `t` in `f64` given as
-/// `redo(t, lanes, inv_det, e2, q)`. The block test ([`TriBlock::intersect1`]) reads `e2` from
-/// the block, which stays in memory, and recomputes `q` there: with `e2` and `q` alive past
-/// the filter for that path, the single-ray kernel, short of registers, stored both to the
-/// stack on every block, rejected or not. The packet kernels' broadcast test keeps the lanes.
+/// `redo(t, lanes, inv_det, e2, q, origin)`. The block test ([`TriBlock::intersect1`]) reads
+/// `e2` from the block, which stays in memory, and recomputes `q` there from `origin`: with
+/// `e2` and `q` alive past the filter for that path, the single-ray kernel, short of
+/// registers, stored both to the stack on every block, rejected or not. The packet kernels'
+/// broadcast test keeps the lanes.
 // Measured (callgrind, the CS184 beetle's diffuse rays at AVX2, `Scene::intersect1`): 899.1
-// -> 886.9 instructions per ray, the same hits; PERFORMANCE.md, "Spills of the single-ray
-// kernel".
+// -> 886.9 instructions per ray, the same hits; the origin passed as a copy, 875.8 -> 859.6
+// (fewer stores per ray); PERFORMANCE.md, "Spills of the single-ray kernel" and "The
+// single-ray kernel's set-up".
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub(crate) fn moller_trumbore_with<V: Lanes>(
@@ -80,7 +83,7 @@ pub(crate) fn moller_trumbore_with<V: Lanes>(
     v0: &Vec3x<V>,
     e1: &Vec3x<V>,
     e2: &Vec3x<V>,
-    redo: impl FnOnce(V, u32, V, &Vec3x<V>, &Vec3x<V>) -> V,
+    redo: impl FnOnce(V, u32, V, &Vec3x<V>, &Vec3x<V>, &Vec3x<V>) -> V,
 ) -> (V, V, V, V) {
     const SLACK: f32 = 1.0 / 65536.0;
     const TINY_DET: f32 = 7.888_609e-31; // 2^-100
@@ -124,7 +127,10 @@ pub(crate) fn moller_trumbore_with<V: Lanes>(
     let overflow = (det_ok & inside & !t.is_finite()).bitmask();
     if overflow != 0 {
         // Rare: the dot product overflowed (origin ~1e13 or more away); redo it in f64.
-        t = redo(t, overflow, inv_det, e2, &q);
+        // The origin goes to `redo` as a copy made here: a reference to the caller's would
+        // keep the caller's lanes in memory on every path.
+        let origin = *origin;
+        t = redo(t, overflow, inv_det, e2, &q, &origin);
     }
     let valid = det_ok & inside & t.gt(tnear) & t.le(tfar) & t.lt(V::splat(f32::INFINITY));
     (valid, t, u, v)
@@ -198,7 +204,7 @@ pub trait TriBlock: bytemuck::Pod + Send + Sync + std::fmt::Debug + 'static {
     /// per lane (`V` must have M lanes).
     #[inline(always)]
     fn intersect1<V: Lanes>(&self, origin: &Vec3x<V>, dir: &Vec3x<V>, tnear: V, tfar: V) -> BlockHits<V> {
-        let redo = |t, lanes, inv_det, _: &Vec3x<V>, _: &Vec3x<V>| {
+        let redo = |t, lanes, inv_det, _: &Vec3x<V>, _: &Vec3x<V>, origin: &Vec3x<V>| {
             redo_t_f64(t, lanes, inv_det, |i| {
                 let [v0, e1, e2] = self.lane_rows(i);
                 // `moller_trumbore`'s operations for `q`, in its order: the same bits.
