@@ -118,9 +118,12 @@ pub fn is_finite3(v: Vec3) -> bool {
 /// tests never compute `0 * inf = NaN` for rays parallel to a slab.
 #[inline]
 pub fn safe_recip(x: f32) -> f32 {
-    const TINY: f32 = 1e-18;
-    if x.abs() < TINY { (1.0 / TINY).copysign(x) } else { 1.0 / x }
+    if x.abs() < SAFE_RECIP_TINY { (1.0 / SAFE_RECIP_TINY).copysign(x) } else { 1.0 / x }
 }
+
+/// The magnitude below which [`safe_recip`] clamps (the single-ray kernels' lane version
+/// shares it).
+pub(crate) const SAFE_RECIP_TINY: f32 = 1e-18;
 
 /// [`safe_recip`] per component.
 #[inline]

@@ -78,8 +78,8 @@ impl<T: TriBlock, C: Counter> IsaOp for Intersect1<'_, T, C> {
     #[inline(always)]
     fn run<I: IsaLanes>(self) -> Hit {
         let mut hit = Hit::MISS;
-        if self.ray.is_valid() {
-            let (bvh, r, mut tfar) = (self.bvh.slices(), Ray1::<I::F8>::new(self.ray), self.ray.tfar);
+        if let Some(r) = Ray1::<I::F8>::try_new(self.ray) {
+            let (bvh, mut tfar) = (self.bvh.slices(), self.ray.tfar);
             let root = bvh.root();
             if self.bvh.speculates() {
                 with_kernel!(bvh.test, P => bvh.intersect1_from::<I, P, C, true>(&r, root, &mut tfar, &mut hit, self.counter));
@@ -101,9 +101,14 @@ impl<T: TriBlock, C: Counter> IsaOp for Occluded1<'_, T, C> {
     type Output = bool;
     #[inline(always)]
     fn run<I: IsaLanes>(self) -> bool {
-        self.ray.is_valid() && {
-            let (bvh, r) = (self.bvh.slices(), Ray1::<I::F8>::new(self.ray));
-            with_kernel!(bvh.test, P => bvh.occluded1_from::<I, P, C, true>(&r, bvh.root(), self.counter))
+        // A `match`, not `Option::is_some_and`: a closure does not inherit the ISA's target
+        // features, and this one, too large to inline, ran the kernel's intrinsics as calls.
+        match Ray1::<I::F8>::try_new(self.ray) {
+            Some(r) => {
+                let bvh = self.bvh.slices();
+                with_kernel!(bvh.test, P => bvh.occluded1_from::<I, P, C, true>(&r, bvh.root(), self.counter))
+            }
+            None => false,
         }
     }
 }

@@ -44,6 +44,7 @@ use crate::bvh::counters::{Counter, Work};
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
 use crate::geometry::sphere_block::sphere_lanes;
 use crate::geometry::{TriBlock, TriangleKernel};
+use crate::math::{SAFE_RECIP_TINY, Vec3};
 use crate::ray::{Hit, Ray};
 use crate::simd::{IsaLanes, Lanes, Vec3x};
 use std::mem::MaybeUninit;
@@ -58,7 +59,10 @@ pub struct Ray1<V> {
     /// `inv * SLAB_WIDEN` per axis: the far planes' factor (see [`Ray1::intersect_node`]).
     inv_far: Vec3x<V>,
     tnear: V,
-    /// Row of the node's bounds holding the near plane of each axis (the far one is `^ 1`).
+    /// Where the near plane of each axis starts in the node's bounds read as one array of 48
+    /// floats (`Bvh8Node::bounds` flattened): 0 or 8, 16 or 24, 32 or 40; the far plane's
+    /// row is the other one (`^ 8`). In floats rather than rows so that the loads index with
+    /// the address's scale factor and need no shift per node.
     near: [usize; 3],
 }
 
@@ -66,8 +70,37 @@ impl<V: Lanes> Ray1<V> {
     /// Precomputes the slab-test constants of `ray` (which must be valid).
     #[inline(always)]
     pub fn new(ray: &Ray) -> Self {
+        Self::from_lanes(ray, V::load(&ray.to_array()))
+    }
+
+    /// The constants of `ray` when it is valid ([`Ray::is_valid`]), `None` when it is not:
+    /// the validity check and the reciprocal direction on the ray's eight floats as one
+    /// vector of lanes (two comparisons and one division) instead of a branch and a division
+    /// per component.
+    #[inline(always)]
+    pub fn try_new(ray: &Ray) -> Option<Self> {
+        let v = V::load(&ray.to_array());
+        let a = v.abs();
+        // Lanes 0-5: origin and direction finite; lanes 3-5: some direction component of
+        // magnitude at least `Ray::MIN_DIRECTION` (NaN fails both).
+        let finite = a.le(V::splat(f32::MAX)).bitmask() & 0x3f == 0x3f;
+        let moving = a.ge(V::splat(Ray::MIN_DIRECTION)).bitmask() & 0x38 != 0;
+        // No closure (`bool::then`): closures do not inherit the ISA's target features.
+        if finite & moving & (ray.tnear >= 0.0) & (ray.tnear <= ray.tfar) {
+            Some(Self::from_lanes(ray, v))
+        } else {
+            None
+        }
+    }
+
+    #[inline(always)]
+    fn from_lanes(ray: &Ray, v: V) -> Self {
         debug_assert_eq!(V::LANES, 8, "one lane per child slot");
-        let inv = ray.inv_dir();
+        // `crate::math::safe_recip` per lane (lanes 3-5 are the direction's).
+        let tiny = V::splat(SAFE_RECIP_TINY);
+        let recip = v.abs().lt(tiny).select(V::splat(1.0 / SAFE_RECIP_TINY).copysign(v), V::splat(1.0) / v);
+        let inv = Vec3::new(recip.lane(3), recip.lane(4), recip.lane(5));
+        let neg = recip.lt(V::splat(0.0)).bitmask();
         // `+ 0.0` turns a `tnear` of `-0.0` into `+0.0` (see `intersect_node`), in the ray
         // itself so that the node and the triangle tests share one value.
         let ray = Ray { tnear: ray.tnear + 0.0, ..*ray };
@@ -77,7 +110,7 @@ impl<V: Lanes> Ray1<V> {
             inv: Vec3x::splat(inv),
             inv_far: Vec3x::splat(inv * SLAB_WIDEN),
             tnear: V::splat(ray.tnear),
-            near: [(inv.x < 0.0) as usize, 2 + (inv.y < 0.0) as usize, 4 + (inv.z < 0.0) as usize],
+            near: [(neg & 8) as usize, 16 + (neg >> 1 & 8) as usize, 32 + (neg >> 2 & 8) as usize],
         }
     }
 
@@ -119,14 +152,18 @@ impl<V: Lanes> Ray1<V> {
     // two retries).
     #[inline(always)]
     pub fn intersect_node(&self, n: &Bvh8Node, tfar: f32) -> (u32, V) {
-        let b = &n.bounds;
-        let [nx, ny, nz] = self.near;
-        let tnx = (V::load(&b[nx]) - self.org.x) * self.inv.x;
-        let tny = (V::load(&b[ny]) - self.org.y) * self.inv.y;
-        let tnz = (V::load(&b[nz]) - self.org.z) * self.inv.z;
-        let tfx = (V::load(&b[nx ^ 1]) - self.org.x) * self.inv_far.x;
-        let tfy = (V::load(&b[ny ^ 1]) - self.org.y) * self.inv_far.y;
-        let tfz = (V::load(&b[nz ^ 1]) - self.org.z) * self.inv_far.z;
+        let b = n.bounds.as_flattened();
+        // The masks restate the offsets' ranges (see `near`) so that the loads need no bounds
+        // checks where the compiler cannot see where the offsets came from: the interleaved
+        // kernels keep their rays' constants in memory (in the single-ray kernels they fold
+        // away).
+        let [nx, ny, nz] = [self.near[0] & 8, 16 | self.near[1] & 8, 32 | self.near[2] & 8];
+        let tnx = (V::load(&b[nx..]) - self.org.x) * self.inv.x;
+        let tny = (V::load(&b[ny..]) - self.org.y) * self.inv.y;
+        let tnz = (V::load(&b[nz..]) - self.org.z) * self.inv.z;
+        let tfx = (V::load(&b[nx ^ 8..]) - self.org.x) * self.inv_far.x;
+        let tfy = (V::load(&b[ny ^ 8..]) - self.org.y) * self.inv_far.y;
+        let tfz = (V::load(&b[nz ^ 8..]) - self.org.z) * self.inv_far.z;
         if V::INT_ORDER {
             let tn = tnx.max_bits(tny).max_bits(tnz.max_bits(self.tnear));
             let tf = tfx.min_bits(tfy).min_bits(tfz.min_bits(V::splat(tfar)));
@@ -688,6 +725,73 @@ mod tests {
                 spheres_hit += mask.count_ones();
             }
             (boxes_hit, spheres_hit)
+        }
+    }
+
+    /// [`Ray1::try_new`]'s check and constants, in lanes, against [`Ray::is_valid`],
+    /// [`crate::math::safe_recip3`] and the direction's signs, on rays whose floats are drawn
+    /// from the edge cases (zeros of both signs, the smallest directions, the largest finite
+    /// values, infinities, NaN, subnormals) as well as at random.
+    struct RayConstantsMatchScalar;
+    impl IsaOp for RayConstantsMatchScalar {
+        type Output = (u32, u32);
+        #[inline(always)]
+        fn run<I: IsaLanes>(self) -> (u32, u32) {
+            const EDGES: [f32; 16] = [
+                0.0,
+                -0.0,
+                1e-19,
+                -1e-19,
+                Ray::MIN_DIRECTION,
+                -Ray::MIN_DIRECTION,
+                1e-40,
+                1.5,
+                -2.0,
+                f32::MAX,
+                -f32::MAX,
+                f32::INFINITY,
+                f32::NEG_INFINITY,
+                f32::NAN,
+                3.0,
+                -0.75,
+            ];
+            let mut rng = crate::render::sampler::Rng::new(7, 3);
+            let (mut valid, mut invalid) = (0, 0);
+            for _ in 0..20000 {
+                let f: [f32; 8] = std::array::from_fn(|_| {
+                    let k = (rng.next_f32() * 24.0) as usize;
+                    if k < 16 { EDGES[k] } else { rng.next_f32() * 4.0 - 2.0 }
+                });
+                let ray = Ray::segment(Vec3::new(f[0], f[1], f[2]), Vec3::new(f[3], f[4], f[5]), f[6], f[7]);
+                let got = Ray1::<I::F8>::try_new(&ray);
+                assert_eq!(got.is_some(), ray.is_valid(), "{}: {ray:?}", I::ISA);
+                let Some(r) = got else {
+                    invalid += 1;
+                    continue;
+                };
+                valid += 1;
+                let inv = crate::math::safe_recip3(ray.dir);
+                let lanes = |v: &Vec3x<I::F8>| [v.x.lane(7), v.y.lane(7), v.z.lane(7)].map(f32::to_bits);
+                assert_eq!(lanes(&r.inv), inv.to_array().map(f32::to_bits), "{}: {ray:?}", I::ISA);
+                assert_eq!(lanes(&r.inv_far), (inv * SLAB_WIDEN).to_array().map(f32::to_bits), "{}: {ray:?}", I::ISA);
+                assert_eq!(lanes(&r.org), ray.origin.to_array().map(f32::to_bits), "{}: {ray:?}", I::ISA);
+                let near =
+                    [(inv.x < 0.0) as usize * 8, 16 + (inv.y < 0.0) as usize * 8, 32 + (inv.z < 0.0) as usize * 8];
+                assert_eq!(r.near, near, "{}: {ray:?}", I::ISA);
+                let tnear = (ray.tnear + 0.0).to_bits();
+                assert_eq!((r.ray.tnear.to_bits(), r.tnear.lane(3).to_bits()), (tnear, tnear), "{}: {ray:?}", I::ISA);
+                let n = Ray1::<I::F8>::new(&ray);
+                assert_eq!((lanes(&n.inv), n.near), (lanes(&r.inv), r.near), "{}: {ray:?}", I::ISA);
+            }
+            (valid, invalid)
+        }
+    }
+
+    #[test]
+    fn ray_constants_in_lanes_match_the_scalar_ones_on_every_isa() {
+        for isa in crate::simd::Isa::available() {
+            let (valid, invalid) = dispatch(isa, RayConstantsMatchScalar);
+            assert!(valid > 1000 && invalid > 1000, "{isa}: both kinds must occur ({valid} valid, {invalid} invalid)");
         }
     }
 
