@@ -155,8 +155,9 @@ impl<V: Lanes> Ray1<V> {
         let b = n.bounds.as_flattened();
         // The masks restate the offsets' ranges (see `near`) so that the loads need no bounds
         // checks where the compiler cannot see where the offsets came from: the interleaved
-        // kernels keep their rays' constants in memory (in the single-ray kernels they fold
-        // away).
+        // kernels keep their rays' constants in memory (in the single-ray kernels, which can,
+        // they cost three instructions per beetle diffuse ray; PERFORMANCE.md, "The single-ray
+        // kernel's set-up").
         let [nx, ny, nz] = [self.near[0] & 8, 16 | self.near[1] & 8, 32 | self.near[2] & 8];
         let tnx = (V::load(&b[nx..]) - self.org.x) * self.inv.x;
         let tny = (V::load(&b[ny..]) - self.org.y) * self.inv.y;
