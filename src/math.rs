@@ -121,8 +121,8 @@ pub fn safe_recip(x: f32) -> f32 {
     if x.abs() < SAFE_RECIP_TINY { (1.0 / SAFE_RECIP_TINY).copysign(x) } else { 1.0 / x }
 }
 
-/// The magnitude below which [`safe_recip`] clamps (the single-ray kernels' lane version
-/// shares it).
+/// The magnitude below which [`safe_recip`] clamps (its lane version in the kernels,
+/// `bvh::traverse1::safe_recip_lanes`, and `Ray::MIN_DIRECTION` share it).
 pub(crate) const SAFE_RECIP_TINY: f32 = 1e-18;
 
 /// [`safe_recip`] per component.

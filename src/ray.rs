@@ -58,7 +58,7 @@ impl Ray {
     /// clamp ([`crate::math::safe_recip`]). A direction shorter than this on every axis has
     /// no exact reciprocal on any axis, so box tests would cut its (huge) hit distances short;
     /// such rays count as having no direction, like a zero one.
-    pub const MIN_DIRECTION: f32 = 1e-18;
+    pub const MIN_DIRECTION: f32 = crate::math::SAFE_RECIP_TINY;
 
     /// The eight floats `origin, dir, tnear, tfar`.
     #[inline(always)]

@@ -49,6 +49,16 @@ use crate::ray::{Hit, Ray};
 use crate::simd::{IsaLanes, Lanes, Vec3x};
 use std::mem::MaybeUninit;
 
+/// `crate::math::safe_recip` in every lane: magnitudes below `SAFE_RECIP_TINY` map to its
+/// reciprocal with the lane's sign. (Kernels use small functions, not closures: a closure is
+/// compiled without the ISA's target features and, holding SIMD code, is not inlined into the
+/// kernel.)
+#[inline(always)]
+pub(crate) fn safe_recip_lanes<V: Lanes>(x: V) -> V {
+    let tiny = V::splat(SAFE_RECIP_TINY);
+    x.abs().lt(tiny).select(V::splat(1.0 / SAFE_RECIP_TINY).copysign(x), V::splat(1.0) / x)
+}
+
 /// Per-ray constants of the single-ray kernels, in lanes `V` of 8 (one per child slot).
 #[derive(Clone, Copy, Debug)]
 pub struct Ray1<V> {
@@ -96,9 +106,7 @@ impl<V: Lanes> Ray1<V> {
     #[inline(always)]
     fn from_lanes(ray: &Ray, v: V) -> Self {
         debug_assert_eq!(V::LANES, 8, "one lane per child slot");
-        // `crate::math::safe_recip` per lane (lanes 3-5 are the direction's).
-        let tiny = V::splat(SAFE_RECIP_TINY);
-        let recip = v.abs().lt(tiny).select(V::splat(1.0 / SAFE_RECIP_TINY).copysign(v), V::splat(1.0) / v);
+        let recip = safe_recip_lanes(v); // lanes 3-5 are the direction's
         let inv = Vec3::new(recip.lane(3), recip.lane(4), recip.lane(5));
         let neg = recip.lt(V::splat(0.0)).bitmask();
         // `+ 0.0` turns a `tnear` of `-0.0` into `+0.0` (see `intersect_node`), in the ray

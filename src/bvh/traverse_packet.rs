@@ -58,7 +58,7 @@ use crate::bvh::bvh8::Bvh8Ref;
 use crate::bvh::counters::{Counter, Work};
 use crate::bvh::frustum::Frustum;
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
-use crate::bvh::traverse1::Ray1;
+use crate::bvh::traverse1::{Ray1, safe_recip_lanes};
 use crate::geometry::sphere_block::sphere_lanes;
 use crate::geometry::{TriBlock, TriangleKernel, TriangleTest};
 use crate::ray::{Hit, Ray};
@@ -86,14 +86,6 @@ pub struct PacketRays<V> {
     pub prim: V,
     /// Lanes that are queried and valid (all-ones lanes).
     pub active: V,
-}
-
-/// `crate::math::safe_recip` lane-wise: components below 1e-18 in magnitude map to 1e18 of
-/// the same sign. (Kernels use small functions, not closures: a closure is compiled without
-/// the ISA's target features and, holding SIMD code, is not inlined into the kernel.)
-#[inline(always)]
-fn safe_recip<V: Lanes>(x: V) -> V {
-    x.abs().lt(V::splat(1e-18)).select(V::splat(1.0 / 1e-18f32).copysign(x), V::splat(1.0) / x)
 }
 
 #[inline(always)]
@@ -148,7 +140,7 @@ impl<V: Lanes> PacketRays<V> {
         Self {
             org,
             dir,
-            inv: Vec3x { x: safe_recip(dir.x), y: safe_recip(dir.y), z: safe_recip(dir.z) },
+            inv: Vec3x { x: safe_recip_lanes(dir.x), y: safe_recip_lanes(dir.y), z: safe_recip_lanes(dir.z) },
             tnear,
             tfar,
             u: zero,
