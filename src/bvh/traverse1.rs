@@ -698,7 +698,7 @@ mod tests {
         type Output = (u32, u32);
         #[inline(always)]
         fn run<I: IsaLanes>(self) -> (u32, u32) {
-            let mut rng = crate::render::sampler::Rng::new(5, 9);
+            let mut rng = crate::rng::Rng::new(5, 9);
             let mut r3 = move || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - 2.0;
             let (mut boxes_hit, mut spheres_hit) = (0, 0);
             for k in 0..4000 {
@@ -764,7 +764,7 @@ mod tests {
                 3.0,
                 -0.75,
             ];
-            let mut rng = crate::render::sampler::Rng::new(7, 3);
+            let mut rng = crate::rng::Rng::new(7, 3);
             let (mut valid, mut invalid) = (0, 0);
             for _ in 0..20000 {
                 let f: [f32; 8] = std::array::from_fn(|_| {

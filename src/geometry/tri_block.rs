@@ -534,7 +534,7 @@ mod tests {
 
     /// Random triangles (some degenerate, some sharing vertices) and rays aimed at them.
     fn cases(seed: u64) -> Vec<(Ray, [[Vec3; 3]; 8])> {
-        let mut rng = crate::render::sampler::Rng::new(seed, 3);
+        let mut rng = crate::rng::Rng::new(seed, 3);
         let mut r3 = move || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - 2.0;
         (0..3000)
             .map(|k| {

@@ -270,7 +270,7 @@ mod tests {
 
     #[test]
     fn lanes_match_scalar_bit_for_bit() {
-        let mut rng = crate::render::sampler::Rng::new(7, 1);
+        let mut rng = crate::rng::Rng::new(7, 1);
         let mut r3 = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 - 1.0;
         for _ in 0..2000 {
             let tri = [r3(), r3(), r3()];

@@ -131,7 +131,7 @@ fn normalized<V: Lanes>(v: Vec3x<V>) -> (Vec3x<V>, V) {
 mod tests {
     use crate::math::Vec3;
     use crate::ray::{Hit, Ray};
-    use crate::render::sampler::Rng;
+    use crate::rng::Rng;
     use crate::scene::{Material, SceneBuilder, SurfaceHit};
     use crate::{BuildOptions, Isa};
 
