@@ -54,6 +54,33 @@ pub enum IntegratorKind {
 }
 
 impl IntegratorKind {
+    /// Every integrator.
+    pub const ALL: [IntegratorKind; 6] = [
+        IntegratorKind::Normals,
+        IntegratorKind::Direct,
+        IntegratorKind::Global,
+        IntegratorKind::DirectOnly,
+        IntegratorKind::IndirectOnly,
+        IntegratorKind::Bounce,
+    ];
+
+    /// The name `--integrator` takes (`direct-only`, …).
+    pub fn name(&self) -> &'static str {
+        match self {
+            IntegratorKind::Normals => "normals",
+            IntegratorKind::Direct => "direct",
+            IntegratorKind::Global => "global",
+            IntegratorKind::DirectOnly => "direct-only",
+            IntegratorKind::IndirectOnly => "indirect-only",
+            IntegratorKind::Bounce => "bounce",
+        }
+    }
+
+    /// The integrator of [`IntegratorKind::name`].
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| k.name() == name)
+    }
+
     /// How the film of this integrator is encoded to 8 bits.
     pub fn encoding(&self) -> Encoding {
         match self {

@@ -9,7 +9,9 @@
 //! ([`crate::Scene::cone_may_hit`]), and take the value of a miss without tracing. Each sample
 //! `s` of pixel `p` draws its random numbers from its own generator seeded by `(seed, p, s)`,
 //! so the image is a pure function of the scene, the settings and the seed, whatever the
-//! thread count.
+//! thread count; and a pixel's value does not depend on the window it is rendered in
+//! ([`render_window`], [`window`]), so parts of an image rendered anywhere merge bit for bit
+//! ([`merge`]).
 
 pub mod adaptive;
 pub mod bsdf;
@@ -20,7 +22,9 @@ pub mod frame;
 pub mod heatmap;
 pub mod integrator;
 pub mod light;
+pub mod merge;
 pub mod order;
+pub mod part;
 pub mod queue;
 pub mod sampler;
 pub mod sampling;
@@ -28,12 +32,14 @@ pub mod spawn;
 pub mod stats;
 pub mod trace;
 pub mod wavefront;
+pub mod window;
 
 pub use film::{Encoding, Film, ImageError, ImageFormat};
 pub use integrator::IntegratorKind;
 pub use order::RayOrder;
 pub use stats::{RayCounts, RayKind, RayLog};
 pub use wavefront::{PhaseTimes, StreamOrder};
+pub use window::{PixelBounds, WindowError};
 
 use crate::math::Vec3;
 use crate::ray::Ray;
@@ -136,9 +142,14 @@ pub struct RenderStats {
 /// The result of a render.
 #[derive(Clone, Debug)]
 pub struct RenderOutput {
-    /// The image.
+    /// The pixels of [`RenderOutput::window`] (the whole image unless [`render_window`] was
+    /// given a part of it).
     pub film: Film,
-    /// Samples taken per pixel (differs from the setting only with adaptive sampling).
+    /// The pixels rendered, in the whole image of [`RenderSettings::width`] ×
+    /// [`RenderSettings::height`].
+    pub window: PixelBounds,
+    /// Samples taken per pixel of the window, row-major (differs from the setting only with
+    /// adaptive sampling).
     pub samples_per_pixel: Vec<u32>,
     /// Measurements.
     pub stats: RenderStats,
@@ -156,12 +167,26 @@ pub fn render(
     settings: &RenderSettings,
     progress: &(dyn Fn(u64) + Sync),
 ) -> RenderOutput {
+    render_window(scene, camera, settings, &PixelBounds::full(settings.width, settings.height), progress)
+}
+
+/// Renders the pixels of `window` of the image [`render`] would make: each of them has,
+/// bit for bit, the value it has in the whole image. `progress` is called with the number of
+/// tiles done each time a tile completes ([`tiles_in`] tiles in all).
+///
+/// # Panics
+/// When `window` is empty or not inside the image ([`PixelBounds::within`] checks it).
+pub fn render_window(
+    scene: &Scene,
+    camera: &Camera,
+    settings: &RenderSettings,
+    window: &PixelBounds,
+    progress: &(dyn Fn(u64) + Sync),
+) -> RenderOutput {
     use rayon::prelude::*;
-    let (w, h) = (settings.width, settings.height);
+    let window = window.within(settings.width, settings.height).unwrap_or_else(|e| panic!("render_window: {e}"));
     let start = Instant::now();
-    let tiles_x = w.div_ceil(TILE);
-    let tiles: Vec<(usize, usize)> =
-        (0..h.div_ceil(TILE)).flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty))).collect();
+    let tiles = tiles_of(&window);
     let done = AtomicU64::new(0);
     let integrator = integrator::Integrator::new(scene, settings);
     let camera = camera::CameraRays::new(camera);
@@ -170,26 +195,26 @@ pub fn render(
     let rendered: Vec<TileResult> = tiles
         .par_iter()
         .with_max_len(1)
-        .map(|&(tx, ty)| {
-            let r = wavefronts.with(|wf| render_tile(&integrator, &camera, settings, order, wf, tx, ty));
+        .map(|tile| {
+            let r = wavefronts.with(|wf| render_tile(&integrator, &camera, settings, order, wf, tile));
             progress(done.fetch_add(1, Ordering::Relaxed) + 1);
             r
         })
         .collect();
+    let (w, h) = (window.width(), window.height());
     let mut film = Film::new(w, h);
     let mut spp = vec![0u32; w * h];
     let mut log = RayLog::for_tiles(tiles.len());
     let mut stats = RenderStats::default();
-    for (&(tx, ty), tile) in tiles.iter().zip(rendered) {
+    for (b, tile) in tiles.iter().zip(rendered) {
         log.merge(tile.log);
         stats.invalid_samples += tile.invalid_samples;
         stats.clamped_samples += tile.clamped_samples;
         stats.culled_samples += tile.culled_samples;
         stats.phases += tile.phases;
-        let (x0, y0) = (tx * TILE, ty * TILE);
-        let tw = TILE.min(w - x0);
+        let tw = b.width();
         for (i, est) in tile.pixels.iter().enumerate() {
-            let (x, y) = (x0 + i % tw, y0 + i / tw);
+            let (x, y) = (b.x0 - window.x0 + i % tw, b.y0 - window.y0 + i / tw);
             film.pixels[y * w + x] = est.mean();
             spp[y * w + x] = est.n;
         }
@@ -198,7 +223,23 @@ pub fn render(
     stats.rays = log.counts;
     stats.sampled_rays = log.sampled;
     stats.time = start.elapsed();
-    RenderOutput { film, samples_per_pixel: spp, stats }
+    RenderOutput { film, window, samples_per_pixel: spp, stats }
+}
+
+/// The number of tiles a render of `window` takes (what its `progress` counts up to).
+pub fn tiles_in(window: &PixelBounds) -> usize {
+    window.width().div_ceil(TILE) * window.height().div_ceil(TILE)
+}
+
+/// `window` cut into tiles of [`TILE`] × [`TILE`] pixels from its top-left corner, row by row.
+fn tiles_of(window: &PixelBounds) -> Vec<PixelBounds> {
+    let mut tiles = Vec::with_capacity(tiles_in(window));
+    for y0 in (window.y0..window.y1).step_by(TILE) {
+        for x0 in (window.x0..window.x1).step_by(TILE) {
+            tiles.push(PixelBounds { x0, x1: (x0 + TILE).min(window.x1), y0, y1: (y0 + TILE).min(window.y1) });
+        }
+    }
+    tiles
 }
 
 /// One wavefront per thread of the rayon pool, reused from tile to tile. Every tile is a rayon
@@ -250,12 +291,10 @@ fn render_tile(
     settings: &RenderSettings,
     order: StreamOrder,
     wavefront: &mut wavefront::Wavefront,
-    tx: usize,
-    ty: usize,
+    tile: &PixelBounds,
 ) -> TileResult {
     let (w, h) = (settings.width, settings.height);
-    let (x0, y0) = (tx * TILE, ty * TILE);
-    let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
+    let PixelBounds { x0, x1, y0, y1 } = *tile;
     let tw = x1 - x0;
     let npix = tw * (y1 - y0);
     let spp = settings.samples_per_pixel.max(1);

@@ -7,6 +7,7 @@ mod bench;
 mod heatmap;
 mod info;
 mod machine;
+mod merge;
 mod rays;
 mod render;
 mod report;
@@ -38,6 +39,23 @@ enum Command {
     /// Combine `raypack bench --json` files into one report: index.html with inline SVG
     /// charts, and the charts as PNG.
     Report(ReportArgs),
+    /// Put the parts of an image (`render --tile`, `--crop-window`, `--pixel-bounds`) back
+    /// together: the same image, bit for bit, as one render of the whole.
+    Merge(MergeArgs),
+}
+
+#[derive(Args)]
+struct MergeArgs {
+    /// The parts: OpenEXR files written by `raypack render` with a window.
+    #[arg(required = true, value_name = "PART")]
+    parts: Vec<PathBuf>,
+    /// The whole image: .exr (linear radiance, the very file a whole render writes) or .png
+    /// (8-bit sRGB, as `raypack render` encodes it).
+    #[arg(short = 'o', long = "output", visible_short_alias = 'f', value_name = "IMAGE")]
+    output: PathBuf,
+    /// No statistics line (errors are still printed).
+    #[arg(short = 'q', long)]
+    quiet: bool,
 }
 
 #[derive(Args)]
@@ -262,6 +280,21 @@ struct RenderArgs {
     /// instancing).
     #[arg(long, value_name = "N", long_help = MAX_PRIMITIVES_HELP)]
     max_primitives: Option<u64>,
+    /// Render only this window of the image, as fractions of its width and height (pbrt's
+    /// --cropwindow; rows from the top): pixels ceil(W*X0) to ceil(W*X1), likewise for rows.
+    /// Written as an OpenEXR part for `raypack merge`.
+    #[arg(long, num_args = 4, value_names = ["X0", "X1", "Y0", "Y1"], allow_negative_numbers = true,
+        conflicts_with_all = ["pixel_bounds", "tile"])]
+    crop_window: Option<Vec<f64>>,
+    /// Render only pixels X0..X1 of rows Y0..Y1 (X1 and Y1 exclusive; pbrt's --pixelbounds).
+    /// Written as an OpenEXR part for `raypack merge`.
+    #[arg(long, num_args = 4, value_names = ["X0", "X1", "Y0", "Y1"], conflicts_with = "tile")]
+    pixel_bounds: Option<Vec<usize>>,
+    /// Render only part I (from 0) of N parts of a fixed grid of nearly square cells; for job
+    /// arrays: `--tile $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT` with `--array=0-(N-1)`.
+    /// Written as an OpenEXR part for `raypack merge`.
+    #[arg(long, value_name = "I/N")]
+    tile: Option<String>,
 }
 
 /// `--shadow-order` / `--bounce-order`: [`raypack::render::RayOrder`].
@@ -293,6 +326,17 @@ enum QualityArg {
     Fast,
     Medium,
     High,
+}
+
+impl QualityArg {
+    /// The name `--quality` takes.
+    fn name(self) -> &'static str {
+        match self {
+            QualityArg::Fast => "fast",
+            QualityArg::Medium => "medium",
+            QualityArg::High => "high",
+        }
+    }
 }
 
 impl From<QualityArg> for BuildQuality {
@@ -403,6 +447,8 @@ enum CliError {
     Output(#[from] raypack::io::output::OutputError),
     #[error(transparent)]
     Rays(#[from] raypack::io::rays::RayFileError),
+    #[error(transparent)]
+    Merge(#[from] merge::MergeFailure),
     #[error("{0}")]
     Usage(String),
 }
@@ -410,7 +456,7 @@ enum CliError {
 fn main() -> ExitCode {
     let mut args: Vec<std::ffi::OsString> = std::env::args_os().collect();
     // CS184 style: `raypack scene.dae -t 8 ...` means `raypack render scene.dae -t 8 ...`.
-    let known = ["render", "info", "bench", "report", "help", "-h", "--help", "-V", "--version"];
+    let known = ["render", "info", "bench", "report", "merge", "help", "-h", "--help", "-V", "--version"];
     if args.len() > 1 && !known.iter().any(|k| args[1] == *k) {
         // A scene file (or a flag of `render`) means `render`; any other first word is a
         // mistyped subcommand, not a scene of an unsupported format.
@@ -418,7 +464,7 @@ fn main() -> ExitCode {
         let is_flag = args[1].to_string_lossy().starts_with('-');
         if !is_flag && !first.exists() && raypack::io::SceneFormat::from_path(first).is_none() {
             eprintln!(
-                "raypack: error: unknown command '{}'; the commands are render, info, bench, report and help \
+                "raypack: error: unknown command '{}'; the commands are render, info, bench, report, merge and help \
                  (`raypack SCENE` renders a .dae, .obj or .ply file; `raypack --help` lists the flags)",
                 args[1].to_string_lossy()
             );
@@ -449,6 +495,7 @@ fn main() -> ExitCode {
         Command::Info(a) => info::cmd_info(a),
         Command::Bench(a) => bench::cmd_bench(a),
         Command::Report(a) => report::write_report(&a.json, &a.out),
+        Command::Merge(a) => merge::cmd_merge(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

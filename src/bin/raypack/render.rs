@@ -10,11 +10,20 @@ use std::time::Instant;
 
 /// `raypack render`: checks the flags, the output paths and the memory, then renders.
 pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
-    let Some(integrator) = a.integrator.kind() else { return crate::heatmap::cmd_heatmap(a) };
+    let window_flag = window_flag(&a);
+    let Some(integrator) = a.integrator.kind() else {
+        if let Some(flag) = window_flag {
+            return Err(CliError::Usage(format!(
+                "{flag} with --integrator heatmap: the heatmap renders whole images only"
+            )));
+        }
+        return crate::heatmap::cmd_heatmap(a);
+    };
     let (width, height) = (a.resolution[0], a.resolution[1]);
     if width == 0 || height == 0 || width > 1 << 15 || height > 1 << 15 {
         return Err(CliError::Usage(format!("-r {width} {height}: width and height must be between 1 and 32768")));
     }
+    let window = parse_window(&a, width, height)?;
     let adaptive = match a.adaptive.as_deref() {
         None => None,
         Some([batch, tol]) if *batch >= 1.0 && batch.fract() == 0.0 && *tol > 0.0 => Some((*batch as u32, *tol)),
@@ -51,7 +60,12 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
     }
     let output = a.output.clone().unwrap_or_else(|| {
         let stem = a.scene.as_ref().and_then(|s| s.file_stem()).map(|s| s.to_string_lossy().into_owned());
-        PathBuf::from(format!("{}.png", stem.as_deref().unwrap_or("cornell")))
+        let stem = stem.as_deref().unwrap_or("cornell");
+        match &window {
+            // A part: named for its pixels, in the format `raypack merge` reads.
+            Some(w) => PathBuf::from(format!("{stem}-{}-{}-{}-{}.exr", w.x0, w.x1, w.y0, w.y1)),
+            None => PathBuf::from(format!("{stem}.png")),
+        }
     });
     // The outputs are checked before anything is computed: `-` is standard output; otherwise
     // only a regular file that is not an input (or nothing, or a FIFO) may be written.
@@ -77,6 +91,15 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             )));
         }
     }
+    if let (Some(flag), false) = (window_flag, render::ImageFormat::for_path(&output) == Some(render::ImageFormat::Exr))
+    {
+        return Err(CliError::Usage(format!(
+            "{flag} renders a part of the image, written as OpenEXR with its place in the image for `raypack merge`: \
+             name an .exr output (-o PART.exr), not {}",
+            if to_stdout { "standard output".to_string() } else { output.display().to_string() }
+        )));
+    }
+    let window = window.unwrap_or(render::PixelBounds::full(width, height));
     if let Some(p) = &a.write_camera {
         raypack::io::output::check_target(p, &out_opts)?;
     }
@@ -103,11 +126,13 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         };
         let format = render::ImageFormat::of(&output);
         let exr = format == render::ImageFormat::Exr;
+        // The buffers that grow with the image hold the window's pixels.
+        let sized = RenderSettings { width: window.width(), height: window.height(), ..settings.clone() };
         check_memory(
-            width,
-            height,
-            raypack::memory::render_bytes(&settings, rayon::current_num_threads(), exr),
-            raypack::memory::render_bytes_per_pixel(&settings, exr),
+            window.width(),
+            window.height(),
+            raypack::memory::render_bytes(&sized, rayon::current_num_threads(), exr),
+            raypack::memory::render_bytes_per_pixel(&sized, exr),
         )?;
         // Read before the scene: a bad camera file fails at once.
         let file_camera = a.camera.as_deref().map(raypack::io::camera_file::load_camera_file).transpose()?;
@@ -147,16 +172,16 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         if let Some(why) = hemisphere_sees_no_light(&scene, &settings) {
             eprintln!("[raypack] warning: -H: {why}");
         }
-        let tiles = width.div_ceil(render::TILE) * height.div_ceil(render::TILE);
-        let bar = if quiet { indicatif::ProgressBar::hidden() } else { progress_bar(tiles) };
+        let bar = if quiet { indicatif::ProgressBar::hidden() } else { progress_bar(render::tiles_in(&window)) };
         if !quiet {
+            let part = if window.is_full(width, height) { String::new() } else { format!(" pixels {window} of") };
             eprintln!(
-                "[raypack] Rendering {width}x{height} with {} threads ({} kernels)...",
+                "[raypack] Rendering{part} {width}x{height} with {} threads ({} kernels)...",
                 rayon::current_num_threads(),
                 scene.isa()
             );
         }
-        let out = render::render(&scene, &camera, &settings, &|done| bar.set_position(done));
+        let out = render::render_window(&scene, &camera, &settings, &window, &|done| bar.set_position(done));
         bar.finish_and_clear();
         if !quiet {
             eprintln!("[raypack] Rendering... 100%! ({:.4}s)", out.stats.time.as_secs_f64());
@@ -171,7 +196,23 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         let encode = |film: &render::Film, path: &Path, format, encoding| {
             film.encode(format, encoding).map_err(|message| render::ImageError::Encode { path: path.into(), message })
         };
-        let image = encode(&out.film, &output, format, settings.integrator.encoding())?;
+        let image = if exr {
+            // With its place in the image and what it was rendered from, so that parts merge
+            // into this very file (`raypack merge`).
+            let name = a.scene.as_deref().and_then(Path::file_name).map(|n| n.to_string_lossy().into_owned());
+            let bvh = format!("quality={} watertight={}", a.quality.name(), a.watertight);
+            let provenance = render::part::Provenance::new(
+                name.as_deref().unwrap_or(crate::BUILT_IN_SCENE),
+                &scene,
+                &camera,
+                &settings,
+                &[("bvh", bvh)],
+            );
+            let part = render::part::ImagePart { width, height, window, film: out.film.clone(), provenance };
+            part.encode_exr().map_err(|message| render::ImageError::Encode { path: output.clone(), message })?
+        } else {
+            encode(&out.film, &output, format, settings.integrator.encoding())?
+        };
         if to_stdout {
             if !quiet {
                 eprint!("[raypack] Writing the image to standard output... ");
@@ -190,7 +231,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             let mut files = vec![stage(&output, &out_opts, &mut |w| w.write_all(&image))?];
             if let (Some(rate), Some((batch, tol))) = (&rate_path, settings.adaptive) {
                 let spp = settings.samples_per_pixel;
-                let film = render::adaptive::rate_film(&out.samples_per_pixel, width, height, spp);
+                let film = render::adaptive::rate_film(&out.samples_per_pixel, window.width(), window.height(), spp);
                 let bytes = encode(&film, rate, render::ImageFormat::Png, render::Encoding::Display)?;
                 files.push(stage(rate, &out_opts, &mut |w| w.write_all(&bytes))?);
                 if !quiet {
@@ -205,6 +246,45 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         }
         Ok(())
     })
+}
+
+/// The window flag given (`--crop-window`, `--pixel-bounds` or `--tile`), for messages.
+fn window_flag(a: &RenderArgs) -> Option<&'static str> {
+    if a.crop_window.is_some() {
+        Some("--crop-window")
+    } else if a.pixel_bounds.is_some() {
+        Some("--pixel-bounds")
+    } else if a.tile.is_some() {
+        Some("--tile")
+    } else {
+        None
+    }
+}
+
+/// The window of `--crop-window`, `--pixel-bounds` or `--tile` in a `width × height` image;
+/// `None` for the whole image.
+fn parse_window(a: &RenderArgs, width: usize, height: usize) -> Result<Option<render::PixelBounds>, CliError> {
+    let usage = |flag: &str, e: render::WindowError| CliError::Usage(format!("{flag}: {e}"));
+    if let Some(c) = a.crop_window.as_deref() {
+        let crop = [c[0], c[1], c[2], c[3]];
+        return render::PixelBounds::from_crop_window(crop, width, height)
+            .map(Some)
+            .map_err(|e| usage("--crop-window", e));
+    }
+    if let Some(b) = a.pixel_bounds.as_deref() {
+        let bounds = render::PixelBounds { x0: b[0], x1: b[1], y0: b[2], y1: b[3] };
+        return bounds.within(width, height).map(Some).map_err(|e| usage("--pixel-bounds", e));
+    }
+    if let Some(t) = a.tile.as_deref() {
+        let Some((i, n)) = render::window::parse_part(t) else {
+            return Err(CliError::Usage(format!(
+                "--tile {t}: expected I/N, part I (from 0) of N parts, such as --tile 0/4 \
+                 (in a Slurm job array: --tile $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT with --array=0-(N-1))"
+            )));
+        };
+        return render::PixelBounds::part(i, n, width, height).map(Some).map_err(|e| usage("--tile", e));
+    }
+    Ok(None)
 }
 
 /// `--lookat`, `--up` and `--fov`, checked.
@@ -353,7 +433,7 @@ fn report(scene: &Scene, settings: &RenderSettings, out: &render::RenderOutput, 
             tests
         );
     }
-    let px = (settings.width * settings.height) as f64;
+    let px = out.window.area() as f64;
     eprintln!(
         "[raypack] {} samples ({:.1} per pixel), {:.4} million samples per second.",
         s.samples,
