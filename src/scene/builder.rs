@@ -100,6 +100,19 @@ impl SceneBuilder {
         Self::default()
     }
 
+    /// A builder holding these arrays as they are (for a scene read back from bytes,
+    /// [`crate::scene::snapshot`], whose caller has checked every index).
+    pub(crate) fn from_parts(
+        triangles: TrianglesSoa,
+        spheres: SpheresSoa,
+        materials: Vec<Material>,
+        lights: Vec<Light>,
+        camera: Option<Camera>,
+    ) -> Self {
+        let has_normals = !triangles.normals.is_empty();
+        Self { triangles, has_normals, spheres, materials, lights, camera }
+    }
+
     /// Adds a material and returns its id.
     pub fn add_material(&mut self, m: Material) -> MaterialId {
         self.materials.push(m);

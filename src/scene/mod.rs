@@ -7,6 +7,7 @@ pub mod camera;
 pub mod light;
 pub mod material;
 pub mod query;
+pub mod snapshot;
 pub mod store;
 pub mod surface;
 

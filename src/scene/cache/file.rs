@@ -69,7 +69,7 @@ pub(crate) struct SectionWriter<'a> {
 }
 
 impl<'a> SectionWriter<'a> {
-    pub(super) fn new() -> Self {
+    pub(crate) fn new() -> Self {
         Self { entries: Vec::new(), data: Vec::new() }
     }
 
@@ -85,7 +85,7 @@ impl<'a> SectionWriter<'a> {
     }
 
     /// Writes header, table and sections to `out`, returning the number of bytes.
-    pub(super) fn write_to(mut self, key: CacheKey, out: &mut dyn Write) -> std::io::Result<u64> {
+    pub(crate) fn write_to(mut self, key: CacheKey, out: &mut dyn Write) -> std::io::Result<u64> {
         let table_end = (64 + 32 * self.entries.len()) as u64;
         let mut at = table_end.next_multiple_of(SECTION_ALIGN);
         for (e, d) in self.entries.iter_mut().zip(&self.data) {
@@ -132,7 +132,7 @@ impl<'a> SectionWriter<'a> {
 /// A cache file mapped into memory whose header, length and checksum have been checked.
 pub(crate) struct CacheFile<'a> {
     /// The file, for errors.
-    pub(super) path: &'a Path,
+    pub(crate) path: &'a Path,
     bytes: &'a [u8],
     entries: Vec<SectionEntry>,
     /// The mapping `bytes` is, when sections may be used in place.
@@ -141,7 +141,7 @@ pub(crate) struct CacheFile<'a> {
 
 impl<'a> CacheFile<'a> {
     /// Checks `bytes` (the whole file at `path`) against `key`.
-    pub(super) fn check(path: &'a Path, bytes: &'a [u8], key: CacheKey) -> Result<Self, CacheError> {
+    pub(crate) fn check(path: &'a Path, bytes: &'a [u8], key: CacheKey) -> Result<Self, CacheError> {
         let p = || path.to_path_buf();
         let header_len = std::mem::size_of::<FileHeader>();
         if bytes.len() < header_len {
@@ -185,7 +185,7 @@ impl<'a> CacheFile<'a> {
 
     /// [`CacheFile::check`] of a whole mapped file, whose sections
     /// [`CacheFile::section_in_place`] can then use where they lie.
-    pub(super) fn check_mapped(path: &'a Path, map: &'a Arc<Mmap>, key: CacheKey) -> Result<Self, CacheError> {
+    pub(crate) fn check_mapped(path: &'a Path, map: &'a Arc<Mmap>, key: CacheKey) -> Result<Self, CacheError> {
         Ok(Self { map: Some(map.clone()), ..Self::check(path, map, key)? })
     }
 

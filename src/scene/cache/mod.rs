@@ -35,7 +35,7 @@
 //! watertight triangle blocks) is one more `Pod` array: a name, a `SectionWriter::push` in
 //! `store` and a `CacheFile::section_in_place` call in `read_accel`.
 
-mod file;
+pub(crate) mod file;
 
 pub use file::{FileHeader, SectionEntry};
 
@@ -76,12 +76,21 @@ impl CacheKey {
     /// The options enter through their `Debug` text, which names every field and prints
     /// floats exactly, so a field added to [`BuildOptions`] later changes the key by itself.
     pub fn of(triangles: &crate::scene::TrianglesSoa, spheres: &crate::scene::SpheresSoa, opts: &BuildOptions) -> Self {
+        Self::of_options_text(triangles, spheres, &format!("{opts:?}"))
+    }
+
+    /// [`CacheKey::of`] with the options given as their `Debug` text.
+    pub(crate) fn of_options_text(
+        triangles: &crate::scene::TrianglesSoa,
+        spheres: &crate::scene::SpheresSoa,
+        options: &str,
+    ) -> Self {
         let mut h = Xxh3::new();
         h.update(b"raypack bvh cache");
         h.update(&FORMAT_VERSION.to_le_bytes());
         h.update(std::any::type_name::<DefaultTriBlock>().as_bytes());
         h.update(&(std::mem::size_of::<DefaultTriBlock>() as u64).to_le_bytes());
-        h.update(format!("{opts:?}").as_bytes());
+        h.update(options.as_bytes());
         for bytes in [
             bytemuck::cast_slice::<_, u8>(&triangles.positions),
             bytemuck::cast_slice(&triangles.indices),
@@ -265,11 +274,11 @@ impl SceneBuilder {
 }
 
 /// The acceleration structures a cache file holds.
-struct Accel {
-    bounds: Aabb,
+pub(crate) struct Accel {
+    pub(crate) bounds: Aabb,
     /// Stored as empty sections when the build did not keep it.
-    bvh2: Option<Bvh2>,
-    bvh8: Bvh8,
+    pub(crate) bvh2: Option<Bvh2>,
+    pub(crate) bvh8: Bvh8,
 }
 
 /// The largest cache file read for a scene of `num_prims` primitives: far above what a build
@@ -365,7 +374,7 @@ fn writable_by_others(dir: &Path) -> Option<String> {
 /// sections can be used in place as in a mapping of the file); a file cut short meanwhile is
 /// an error. (The page faults of the fresh memory are most of the cost: PERFORMANCE.md,
 /// "BVH cache".)
-fn copy_to_private_memory(file: &std::fs::File, len: u64) -> std::io::Result<Mmap> {
+pub(crate) fn copy_to_private_memory(file: &std::fs::File, len: u64) -> std::io::Result<Mmap> {
     let mut copy = memmap2::MmapMut::map_anon(len as usize)?;
     #[cfg(unix)]
     std::os::unix::fs::FileExt::read_exact_at(file, &mut copy, 0)?;
@@ -374,7 +383,7 @@ fn copy_to_private_memory(file: &std::fs::File, len: u64) -> std::io::Result<Mma
     copy.make_read_only()
 }
 
-fn read_accel(f: &CacheFile) -> Result<Accel, CacheError> {
+pub(crate) fn read_accel(f: &CacheFile) -> Result<Accel, CacheError> {
     let bounds = f.section::<Aabb>("bounds")?;
     let bounds = match bounds[..] {
         [b] => b,
@@ -397,7 +406,7 @@ fn read_accel(f: &CacheFile) -> Result<Accel, CacheError> {
 /// The ranges the traversal kernels index with ([`crate::bvh::validate`]'s index checks):
 /// every child, block and primitive reference in range, each node reached once, depth at most
 /// [`crate::bvh::MAX_DEPTH`], empty slots never hit.
-fn check_accel(a: &Accel, num_prims: usize) -> Result<(), String> {
+pub(crate) fn check_accel(a: &Accel, num_prims: usize) -> Result<(), String> {
     use crate::bvh::validate::{check_bvh2_indices, check_bvh8_indices};
     if let Some(b) = &a.bvh2 {
         check_bvh2_indices(b, num_prims).map_err(|e| format!("binary BVH: {e}"))?;
@@ -418,13 +427,7 @@ fn store(dir: &Path, path: &Path, key: CacheKey, scene: &Scene) -> Result<(), Ca
     create.create(dir).map_err(io(dir))?;
     let mut w = SectionWriter::new();
     let bounds = [scene.bounds];
-    w.push("bounds", &bounds);
-    let (nodes, prims) = scene.bvh2.as_ref().map_or((&[][..], &[][..]), |b| (&b.nodes[..], &b.prim_ids[..]));
-    w.push("bvh2.nodes", nodes);
-    w.push("bvh2.prims", prims);
-    w.push("bvh8.nodes", &scene.bvh8.nodes);
-    w.push("bvh8.tris", &scene.bvh8.tris);
-    w.push("bvh8.spheres", &scene.bvh8.spheres);
+    push_accel(&mut w, scene, &bounds);
     // Readable by the other users of a shared cache; only a regular file is replaced.
     let opts = OutputOptions { mode: 0o644, exact_mode: true, allow_fifo: false, sync: false, ..Default::default() };
     let mut w = Some(w);
@@ -433,6 +436,18 @@ fn store(dir: &Path, path: &Path, key: CacheKey, scene: &Scene) -> Result<(), Ca
         .map_err(output)?
         .commit()
         .map_err(output)
+}
+
+/// Adds the sections of `scene`'s acceleration structures (`bounds` is `[scene.bounds]`):
+/// what [`read_accel`] reads.
+pub(crate) fn push_accel<'a>(w: &mut SectionWriter<'a>, scene: &'a Scene, bounds: &'a [Aabb; 1]) {
+    w.push("bounds", bounds);
+    let (nodes, prims) = scene.bvh2.as_ref().map_or((&[][..], &[][..]), |b| (&b.nodes[..], &b.prim_ids[..]));
+    w.push("bvh2.nodes", nodes);
+    w.push("bvh2.prims", prims);
+    w.push("bvh8.nodes", &scene.bvh8.nodes);
+    w.push("bvh8.tris", &scene.bvh8.tris);
+    w.push("bvh8.spheres", &scene.bvh8.spheres);
 }
 
 /// The file name of the cache of `builder`'s geometry with `opts` inside `dir` (what
