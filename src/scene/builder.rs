@@ -363,6 +363,16 @@ pub(crate) struct Filtered {
     pub(crate) camera: Option<Camera>,
 }
 
+/// BVH builds this process has started (see [`bvh_builds`]).
+static BVH_BUILDS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// How many BVHs this process has built: commits count, scenes whose BVH came from the cache
+/// or a snapshot ([`crate::scene::snapshot`]) do not. For checking that a scene was not
+/// rebuilt.
+pub fn bvh_builds() -> u64 {
+    BVH_BUILDS.load(std::sync::atomic::Ordering::Relaxed)
+}
+
 impl Filtered {
     /// Builds the binary BVH and collapses it into the 8-wide one (keeping the binary one
     /// only with [`BuildOptions::keep_bvh2`]).
@@ -388,6 +398,7 @@ impl Filtered {
 
     /// [`Filtered::build`] over `prims`, [`Filtered::build_prims`] made by the caller.
     fn build_over(self, mut prims: Vec<BuildPrim>, opts: &BuildOptions) -> Scene {
+        BVH_BUILDS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let Filtered { triangles, spheres, materials, lights, camera } = self;
         let nt = triangles.len();
         debug_assert_eq!(prims.len(), nt + spheres.len());

@@ -11,7 +11,7 @@ pub mod snapshot;
 pub mod store;
 pub mod surface;
 
-pub use builder::{CommitReport, SceneBuilder, SceneError};
+pub use builder::{CommitReport, SceneBuilder, SceneError, bvh_builds};
 pub use cache::{CacheError, CacheReport};
 pub use camera::Camera;
 pub use light::Light;

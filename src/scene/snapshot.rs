@@ -14,8 +14,7 @@
 //!
 //! | name | element | content |
 //! |---|---|---|
-//! | `options` | `u8` | the [`BuildOptions`] as `Debug` text (the key covers it) |
-//! | `flags` | `u32` | one: bit 0 set for the watertight triangle test |
+//! | `options` | [`OptionsRecord`] | the [`BuildOptions`] the trees were built with (the key covers them) |
 //! | `tri.pos`, `tri.nrm` | `Vec3` | vertex positions, shading normals (empty or one per vertex) |
 //! | `tri.idx`, `tri.mat` | `[u32; 3]`, `u32` | each triangle's vertices and material |
 //! | `sph.center`, `sph.radius`, `sph.mat` | `Vec3`, `f32`, `u32` | spheres |
@@ -34,6 +33,105 @@ use std::sync::Arc;
 
 /// What errors name the bytes by.
 const NAME: &str = "<scene snapshot>";
+
+/// The [`BuildOptions`], field by field.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct OptionsRecord {
+    /// `max_leaf_size`, `bins` (0 for `None`), `quality` (0 fast, 1 medium, 2 high), `split`
+    /// (0 SAH, 1 median), `watertight`, `keep_bvh2`, `collapse.method` (0 optimal, 1
+    /// greedy), `collapse.max_leaf_prims`.
+    pub words: [u64; 8],
+    /// `spatial_split_budget`, `traversal_cost`, `collapse.node_cost`, `collapse.block_cost`,
+    /// `collapse.prim_cost`, zero.
+    pub floats: [f32; 6],
+}
+
+impl OptionsRecord {
+    fn of(o: &BuildOptions) -> Self {
+        use crate::bvh::{BuildQuality, CollapseMethod, CollapseOptions, SplitMethod};
+        // Every field named: a new one must be recorded here.
+        let BuildOptions {
+            max_leaf_size,
+            bins,
+            quality,
+            spatial_split_budget,
+            split,
+            traversal_cost,
+            watertight,
+            collapse: CollapseOptions { method, node_cost, block_cost, prim_cost, max_leaf_prims },
+            keep_bvh2,
+        } = *o;
+        let quality = match quality {
+            BuildQuality::Fast => 0,
+            BuildQuality::Medium => 1,
+            BuildQuality::High => 2,
+        };
+        let split = match split {
+            SplitMethod::Sah => 0,
+            SplitMethod::Median => 1,
+        };
+        let method = match method {
+            CollapseMethod::Optimal => 0,
+            CollapseMethod::Greedy => 1,
+        };
+        let w = |x: usize| x as u64;
+        Self {
+            words: [
+                w(max_leaf_size),
+                w(bins.unwrap_or(0)),
+                quality,
+                split,
+                watertight.into(),
+                keep_bvh2.into(),
+                method,
+                w(max_leaf_prims),
+            ],
+            floats: [spatial_split_budget, traversal_cost, node_cost, block_cost, prim_cost, 0.0],
+        }
+    }
+
+    fn options(&self) -> Result<BuildOptions, String> {
+        use crate::bvh::{BuildQuality, CollapseMethod, CollapseOptions, SplitMethod};
+        let [max_leaf_size, bins, quality, split, watertight, keep_bvh2, method, max_leaf_prims] = self.words;
+        let [spatial_split_budget, traversal_cost, node_cost, block_cost, prim_cost, _] = self.floats;
+        let size = |x: u64| usize::try_from(x).map_err(|_| format!("{x} does not fit a usize"));
+        let flag = |x: u64| match x {
+            0 | 1 => Ok(x == 1),
+            _ => Err(format!("{x} is not a flag")),
+        };
+        Ok(BuildOptions {
+            max_leaf_size: size(max_leaf_size)?,
+            bins: Some(size(bins)?).filter(|&b| b > 0),
+            quality: match quality {
+                0 => BuildQuality::Fast,
+                1 => BuildQuality::Medium,
+                2 => BuildQuality::High,
+                q => return Err(format!("unknown quality {q}")),
+            },
+            spatial_split_budget,
+            split: match split {
+                0 => SplitMethod::Sah,
+                1 => SplitMethod::Median,
+                m => return Err(format!("unknown split method {m}")),
+            },
+            traversal_cost,
+            watertight: flag(watertight)?,
+            collapse: CollapseOptions {
+                method: match method {
+                    0 => CollapseMethod::Optimal,
+                    1 => CollapseMethod::Greedy,
+                    m => return Err(format!("unknown collapse method {m}")),
+                },
+                node_cost,
+                block_cost,
+                prim_cost,
+                max_leaf_prims: size(max_leaf_prims)?,
+            },
+            keep_bvh2: flag(keep_bvh2)?,
+        })
+    }
+}
 
 /// One material: its BSDF's kind and parameters, emission, and name.
 #[repr(C)]
@@ -185,9 +283,8 @@ impl CameraRecord {
 impl Scene {
     /// The scene as bytes (see the module docs); `opts` are the options it was built with.
     pub fn to_snapshot(&self, opts: &BuildOptions) -> Vec<u8> {
-        let options = format!("{opts:?}");
-        let key = CacheKey::of_options_text(&self.triangles, &self.spheres, &options);
-        let flags = [u32::from(self.bvh8.test == TriangleTest::Watertight)];
+        let key = CacheKey::of(&self.triangles, &self.spheres, opts);
+        let options = [OptionsRecord::of(opts)];
         let mut names = Vec::new();
         let materials: Vec<MaterialRecord> = self
             .materials
@@ -203,8 +300,7 @@ impl Scene {
         let bounds = [self.bounds];
         let (t, s) = (&self.triangles, &self.spheres);
         let mut w = SectionWriter::new();
-        w.push("options", options.as_bytes());
-        w.push("flags", &flags);
+        w.push("options", &options);
         w.push("tri.pos", &t.positions);
         w.push("tri.nrm", &t.normals);
         w.push("tri.idx", &t.indices);
@@ -222,9 +318,10 @@ impl Scene {
         out
     }
 
-    /// The scene [`Scene::to_snapshot`] made `bytes` of, after checking them (see the module
-    /// docs). The acceleration structures are used in place in a private copy of the bytes.
-    pub fn from_snapshot(bytes: &[u8]) -> Result<Scene, CacheError> {
+    /// The scene [`Scene::to_snapshot`] made `bytes` of, and the options it was built with,
+    /// after checking them (see the module docs). The acceleration structures are used in
+    /// place in a private copy of the bytes.
+    pub fn from_snapshot(bytes: &[u8]) -> Result<(Scene, BuildOptions), CacheError> {
         let path = Path::new(NAME);
         let malformed = |what: String| CacheError::Malformed { path: path.to_path_buf(), what };
         // A private page-aligned copy, whose sections the trees then use in place.
@@ -238,11 +335,9 @@ impl Scene {
         // The key is checked below, against the geometry and options the bytes hold.
         let claimed = bytes.get(16..32).map_or(CacheKey(0), |k| CacheKey(u128::from_le_bytes(k.try_into().unwrap())));
         let file = CacheFile::check_mapped(path, &map, claimed)?;
-        let options = String::from_utf8(file.section::<u8>("options")?)
-            .map_err(|_| malformed("the build options are not text".into()))?;
-        let watertight = match file.section::<u32>("flags")?[..] {
-            [f] if f <= 1 => f == 1,
-            _ => return Err(malformed("flags is not one word of 0 or 1".into())),
+        let opts = match file.section::<OptionsRecord>("options")?[..] {
+            [r] => r.options().map_err(|e| malformed(format!("build options: {e}")))?,
+            _ => return Err(malformed("options is not one record".into())),
         };
         let triangles = TrianglesSoa {
             positions: file.section("tri.pos")?,
@@ -255,7 +350,7 @@ impl Scene {
             radius: file.section("sph.radius")?,
             material: file.section("sph.mat")?,
         };
-        let key = CacheKey::of_options_text(&triangles, &spheres, &options);
+        let key = CacheKey::of(&triangles, &spheres, &opts);
         if key != claimed {
             return Err(CacheError::Stale { path: path.to_path_buf(), found: claimed, expected: key });
         }
@@ -285,8 +380,9 @@ impl Scene {
         }
         let mut accel = read_accel(&file)?;
         check_accel(&accel, num_prims).map_err(malformed)?;
-        accel.bvh8.test = TriangleTest::from_watertight(watertight);
-        Ok(kept.with_accel(accel.bounds, accel.bvh2, accel.bvh8))
+        // The key covers the options, so the blocks are laid out for this triangle test.
+        accel.bvh8.test = TriangleTest::from_watertight(opts.watertight);
+        Ok((kept.with_accel(accel.bounds, accel.bvh2, accel.bvh8), opts))
     }
 }
 
@@ -332,7 +428,13 @@ mod tests {
             inner_angle_deg: 10.0,
             outer_angle_deg: 20.0,
         });
-        let opts = BuildOptions { watertight, keep_bvh2: watertight, ..BuildOptions::default() };
+        let opts = BuildOptions {
+            watertight,
+            keep_bvh2: watertight,
+            quality: if watertight { crate::BuildQuality::High } else { crate::BuildQuality::Fast },
+            bins: watertight.then_some(32),
+            ..BuildOptions::default()
+        };
         (b.commit(&opts).0, opts)
     }
 
@@ -341,7 +443,8 @@ mod tests {
         for watertight in [false, true] {
             let (s, opts) = scene(watertight);
             let bytes = s.to_snapshot(&opts);
-            let back = Scene::from_snapshot(&bytes).unwrap();
+            let (back, back_opts) = Scene::from_snapshot(&bytes).unwrap();
+            assert_eq!(back_opts, opts);
             assert_eq!(back.materials, s.materials);
             assert_eq!(back.lights, s.lights);
             assert_eq!(back.camera, s.camera);

@@ -76,21 +76,12 @@ impl CacheKey {
     /// The options enter through their `Debug` text, which names every field and prints
     /// floats exactly, so a field added to [`BuildOptions`] later changes the key by itself.
     pub fn of(triangles: &crate::scene::TrianglesSoa, spheres: &crate::scene::SpheresSoa, opts: &BuildOptions) -> Self {
-        Self::of_options_text(triangles, spheres, &format!("{opts:?}"))
-    }
-
-    /// [`CacheKey::of`] with the options given as their `Debug` text.
-    pub(crate) fn of_options_text(
-        triangles: &crate::scene::TrianglesSoa,
-        spheres: &crate::scene::SpheresSoa,
-        options: &str,
-    ) -> Self {
         let mut h = Xxh3::new();
         h.update(b"raypack bvh cache");
         h.update(&FORMAT_VERSION.to_le_bytes());
         h.update(std::any::type_name::<DefaultTriBlock>().as_bytes());
         h.update(&(std::mem::size_of::<DefaultTriBlock>() as u64).to_le_bytes());
-        h.update(options.as_bytes());
+        h.update(format!("{opts:?}").as_bytes());
         for bytes in [
             bytemuck::cast_slice::<_, u8>(&triangles.positions),
             bytemuck::cast_slice(&triangles.indices),
