@@ -8,10 +8,12 @@
 
 ``Scene`` builds a scene from vertex and face arrays, ``load`` reads a scene file,
 ``Scene.intersect`` / ``Scene.occluded`` trace numpy rays over all cores with the GIL
-released, ``render`` runs the path tracer, and ``raypack.trimesh.RayMeshIntersector`` is a
-drop-in for trimesh's ray queries.
+released, ``render`` runs the path tracer (on the whole image or a window of it),
+``raypack.trimesh.RayMeshIntersector`` is a drop-in for trimesh's ray queries, and
+``raypack.dask`` spreads renders and ray batches over a Dask cluster (``pip install
+raypack[dask]``). Scenes pickle with their BVH, which is never rebuilt.
 """
 
-from ._raypack import Hits, Scene, SceneWarning, load, render
+from ._raypack import Hits, Scene, SceneWarning, load, render, tile_bounds
 
-__all__ = ["Hits", "Scene", "SceneWarning", "load", "render"]
+__all__ = ["Hits", "Scene", "SceneWarning", "load", "render", "tile_bounds"]

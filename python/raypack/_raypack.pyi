@@ -15,7 +15,19 @@ _Quality = Literal["fast", "medium", "high"]
 _Integrator = Literal["global", "direct", "direct-only", "indirect-only", "bounce", "normals"]
 _Path = Union[str, PathLike[str]]
 
-__all__ = ["Scene", "Hits", "load", "render", "_ray_sets", "_intersect_stream", "_plane_points", "SceneWarning"]
+__all__ = [
+    "Scene",
+    "Hits",
+    "load",
+    "render",
+    "tile_bounds",
+    "_ray_sets",
+    "_intersect_stream",
+    "_plane_points",
+    "_bvh_builds",
+    "_scene_from_snapshot",
+    "SceneWarning",
+]
 
 class SceneWarning(UserWarning):
     """A scene was loaded or committed with something left out (dropped faces, a BVH cache
@@ -149,6 +161,10 @@ class Scene:
     def faces(self) -> npt.NDArray[np.int64]:
         """The committed triangles ``(M, 3)`` int64 (a copy). A loaded scene's ``prim`` ids
         index these rows."""
+    def __reduce__(self) -> tuple[object, tuple[bytes, bytes | None, tuple[int, int, int, int, int]]]:
+        """Pickling: the scene travels whole, BVH included (about the BVH's size plus the
+        geometry's), and is checked on unpickling as a cache file from another user is; an
+        unpickled scene is never rebuilt."""
 
 def load(
     path: _Path,
@@ -178,14 +194,33 @@ def render(
     quality: _Quality = "medium",
     watertight: bool = False,
     bvh_cache: _Path | None = None,
+    crop_window: tuple[float, float, float, float] | None = None,
+    pixel_bounds: tuple[int, int, int, int] | None = None,
 ) -> npt.NDArray[np.float32]:
     """Renders a scene (a ``Scene`` or a scene file's path) with raypack's path tracer, as
     ``raypack render`` does with the same settings, and returns the linear HDR image as
     float32 ``(height, width, 3)``, top row first. The image depends on the seed only, not on
     the thread count. ``quality``, ``watertight`` and ``bvh_cache`` apply when ``scene`` is a
-    path."""
+    path.
+
+    ``crop_window=(x0, x1, y0, y1)`` (fractions, as pbrt's ``--cropwindow``) or
+    ``pixel_bounds=(x0, x1, y0, y1)`` (pixels, ends exclusive) render only that window and
+    return its pixels ``(y1 - y0, x1 - x0, 3)``, each bit for bit its value in the whole
+    image."""
+
+def tile_bounds(count: int, width: int, height: int) -> list[tuple[int, int, int, int]]:
+    """The pixel bounds ``(x0, x1, y0, y1)`` of the ``count`` parts of a ``width x height``
+    image, numbered as ``raypack render --tile I/N`` numbers them."""
 
 # Not public API: helpers of tools/bench-python.py and the tests.
+def _bvh_builds() -> int:
+    """How many BVHs this process has built (cache and pickle loads do not count)."""
+
+def _scene_from_snapshot(
+    snapshot: bytes, prim_map: bytes | None, report: tuple[int, int, int, int, int]
+) -> Scene:
+    """Unpickles a ``Scene`` (``Scene.__reduce__``), checking the snapshot first."""
+
 def _ray_sets(
     scene: Scene, width: int, height: int, seed: int = 1
 ) -> dict[str, tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], npt.NDArray[np.float32]]]:

@@ -12,7 +12,7 @@ use args::RayArgs;
 use numpy::{PyArray1, PyArray2, PyArray3, PyArrayMethods};
 use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyBytes, PyDict, PyTuple};
 use raypack::io::LoadError;
 use raypack::render::{IntegratorKind, RenderSettings};
 use raypack::{BuildOptions, BuildQuality, CommitReport, Material, Scene, SceneBuilder};
@@ -147,6 +147,9 @@ impl BuildArgs {
 #[pyclass(name = "Scene", module = "raypack", frozen)]
 struct PyScene {
     scene: Scene,
+    /// The options the BVH was built with (a pickle carries them: the snapshot's key covers
+    /// them).
+    opts: BuildOptions,
     /// The caller's face index of each committed triangle, when the commit dropped some.
     prim_map: Option<Vec<u32>>,
     report: CommitReport,
@@ -181,7 +184,7 @@ impl PyScene {
             }
             cache_info = Some((c.path.clone(), c.loaded));
         }
-        Ok(PyScene { scene, prim_map: None, report, cache: cache_info, pools })
+        Ok(PyScene { scene, opts: opts.clone(), prim_map: None, report, cache: cache_info, pools })
     }
 }
 
@@ -429,6 +432,60 @@ impl PyScene {
     fn __repr__(&self) -> String {
         format!("<raypack.Scene: {} triangles, {} spheres>", self.scene.num_triangles(), self.scene.num_spheres())
     }
+
+    /// Pickling: the scene travels whole, BVH included, so that a process unpickling it
+    /// (a Dask worker) never builds it again. The bytes are a snapshot in the BVH cache's
+    /// layout (about the BVH's size plus the geometry's; `len(pickle.dumps(scene))`), checked
+    /// on unpickling as strictly as a cache file from another user.
+    fn __reduce__<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+        let scene = &self.scene;
+        let opts = &self.opts;
+        let bytes = run_detached(py, &self.pools, None, || scene.to_snapshot(opts))?;
+        let prim_map = self.prim_map.as_ref().map(|m| PyBytes::new(py, &u32_bytes(m)));
+        let r = &self.report;
+        let report = (r.triangles, r.spheres, r.dropped_non_finite, r.dropped_degenerate, r.dropped_spheres);
+        let rebuild = py.import("raypack._raypack")?.getattr("_scene_from_snapshot")?;
+        let args = (PyBytes::new(py, &bytes), prim_map, report).into_pyobject(py)?;
+        Ok((rebuild, args))
+    }
+}
+
+/// `u32`s as their little-endian bytes.
+fn u32_bytes(v: &[u32]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+/// Unpickles a `Scene` (see `Scene.__reduce__`): the snapshot is checked before use, and a
+/// damaged or forged one raises `ValueError`. Not part of the public API.
+#[pyfunction]
+fn _scene_from_snapshot(
+    py: Python<'_>,
+    snapshot: &[u8],
+    prim_map: Option<&[u8]>,
+    report: (usize, usize, usize, usize, usize),
+) -> PyResult<PyScene> {
+    let pools = PoolCache::default();
+    let (scene, opts) = run_detached(py, &pools, None, || Scene::from_snapshot(snapshot))?
+        .map_err(|e| PyValueError::new_err(format!("raypack.Scene: cannot unpickle: {e}")))?;
+    let prim_map = match prim_map {
+        None => None,
+        Some(b) => {
+            let map: Vec<u32> = b.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+            // The caller's face indices of the kept faces: increasing, one per triangle.
+            if b.len() % 4 != 0 || map.len() != scene.num_triangles() || map.windows(2).any(|w| w[0] >= w[1]) {
+                return Err(PyValueError::new_err(
+                    "raypack.Scene: cannot unpickle: the face map does not fit the scene's triangles",
+                ));
+            }
+            Some(map)
+        }
+    };
+    let (triangles, spheres, dropped_non_finite, dropped_degenerate, dropped_spheres) = report;
+    if (triangles, spheres) != (scene.num_triangles(), scene.num_spheres()) {
+        return Err(PyValueError::new_err("raypack.Scene: cannot unpickle: the report does not fit the scene"));
+    }
+    let report = CommitReport { triangles, spheres, dropped_non_finite, dropped_degenerate, dropped_spheres };
+    Ok(PyScene { scene, opts, prim_map, report, cache: None, pools })
 }
 
 /// The closest hits of a ray query, one entry per ray: ``t`` (float32, ``inf`` on a miss),
@@ -491,8 +548,10 @@ fn load(
 fn load_path(py: Python<'_>, path: &Path, build: &BuildArgs) -> PyResult<PyScene> {
     let (builder, warnings) = {
         let p = path.to_path_buf();
-        run_detached(py, &PoolCache::default(), build.threads, move || raypack::io::load_scene(&p).map(|l| (l.builder, l.warnings)))?
-            .map_err(load_error)?
+        run_detached(py, &PoolCache::default(), build.threads, move || {
+            raypack::io::load_scene(&p).map(|l| (l.builder, l.warnings))
+        })?
+        .map_err(load_error)?
     };
     for w in warnings {
         warn(py, &w)?;
@@ -506,10 +565,16 @@ fn load_path(py: Python<'_>, path: &Path, build: &BuildArgs) -> PyResult<PyScene
 
 /// Renders a scene (a ``Scene`` or a scene file's path) with the path tracer and returns the
 /// linear HDR image as float32 ``(height, width, 3)``, top row first.
+///
+/// ``crop_window=(x0, x1, y0, y1)`` (fractions of the image, as pbrt's ``--cropwindow``) or
+/// ``pixel_bounds=(x0, x1, y0, y1)`` (pixels, ends exclusive) render only that window of the
+/// ``width x height`` image and return its pixels, ``(y1 - y0, x1 - x0, 3)``: each has, bit for
+/// bit, its value in the whole image, whatever the window and the thread count
+/// (``raypack.tile_bounds`` gives the windows of ``raypack render --tile``).
 #[pyfunction]
 #[pyo3(signature = (scene, *, spp = 1, max_depth = 1, light_samples = 1, width = 480, height = 360, seed = 0,
     integrator = "global", hemisphere = false, russian_roulette = true, threads = None, quality = "medium",
-    watertight = false, bvh_cache = None))]
+    watertight = false, bvh_cache = None, crop_window = None, pixel_bounds = None))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
@@ -527,12 +592,26 @@ fn render<'py>(
     quality: &str,
     watertight: bool,
     bvh_cache: Option<PathBuf>,
+    crop_window: Option<(f64, f64, f64, f64)>,
+    pixel_bounds: Option<(usize, usize, usize, usize)>,
 ) -> PyResult<Bound<'py, PyArray3<f32>>> {
+    use raypack::render::PixelBounds;
     if width == 0 || height == 0 || width > 1 << 15 || height > 1 << 15 {
         return Err(PyValueError::new_err(format!(
             "width, height: expected 1 to 32768 pixels each, got {width} x {height}"
         )));
     }
+    let window = match (crop_window, pixel_bounds) {
+        (Some(_), Some(_)) => {
+            return Err(PyValueError::new_err("crop_window, pixel_bounds: give one of them, not both"));
+        }
+        (Some((x0, x1, y0, y1)), None) => PixelBounds::from_crop_window([x0, x1, y0, y1], width, height)
+            .map_err(|e| PyValueError::new_err(format!("crop_window: {e}")))?,
+        (None, Some((x0, x1, y0, y1))) => PixelBounds { x0, x1, y0, y1 }
+            .within(width, height)
+            .map_err(|e| PyValueError::new_err(format!("pixel_bounds: {e}")))?,
+        (None, None) => PixelBounds::full(width, height),
+    };
     if spp == 0 || light_samples == 0 {
         return Err(PyValueError::new_err(format!(
             "spp, light_samples: expected at least 1 each, got spp={spp}, light_samples={light_samples}"
@@ -571,10 +650,28 @@ fn render<'py>(
     };
     let film = run_detached(py, &s.pools, threads, || {
         let camera = s.scene.camera_or_framing(width as f32 / height as f32);
-        raypack::render::render(&s.scene, &camera, &settings, &|_| {}).film
+        raypack::render::render_window(&s.scene, &camera, &settings, &window, &|_| {}).film
     })?;
     let flat: Vec<f32> = film.pixels.iter().flat_map(|p| p.to_array()).collect();
-    PyArray1::from_vec(py, flat).reshape((height, width, 3))
+    PyArray1::from_vec(py, flat).reshape((window.height(), window.width(), 3))
+}
+
+/// The pixel bounds ``(x0, x1, y0, y1)`` (ends exclusive) of the ``count`` parts of a
+/// ``width x height`` image, in the order ``raypack render --tile I/N`` numbers them: a grid of
+/// nearly square cells, row by row from the top left. Pass one to ``render(pixel_bounds=)``.
+#[pyfunction]
+fn tile_bounds(count: usize, width: usize, height: usize) -> PyResult<Vec<(usize, usize, usize, usize)>> {
+    let parts = raypack::render::PixelBounds::parts(count, width, height)
+        .map_err(|e| PyValueError::new_err(format!("count, width, height: {e}")))?;
+    Ok(parts.into_iter().map(|b| (b.x0, b.x1, b.y0, b.y1)).collect())
+}
+
+/// How many BVHs this process has built (loading one from a cache file or a pickle does not
+/// count). Not part of the public API: for the tests and benchmarks that check that a scene
+/// was not rebuilt.
+#[pyfunction]
+fn _bvh_builds() -> u64 {
+    raypack::scene::bvh_builds()
 }
 
 /// The ray sets of `raypack bench` (`raypack::raysets`) at `width x height`: a dict
@@ -693,6 +790,9 @@ fn _raypack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Hits>()?;
     m.add_function(wrap_pyfunction!(load, m)?)?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_function(wrap_pyfunction!(tile_bounds, m)?)?;
+    m.add_function(wrap_pyfunction!(_bvh_builds, m)?)?;
+    m.add_function(wrap_pyfunction!(_scene_from_snapshot, m)?)?;
     m.add_function(wrap_pyfunction!(_ray_sets, m)?)?;
     m.add_function(wrap_pyfunction!(_intersect_stream, m)?)?;
     m.add_function(wrap_pyfunction!(_plane_points, m)?)?;

@@ -12,8 +12,11 @@ from conftest import REPO
 
 def blocks():
     text = (REPO / "README.md").read_text()
-    section = text.split("## Python", 1)[1].split("\n## ", 1)[0]
-    return re.findall(r"```pycon\n(.*?)```", section, flags=re.S)
+    found = []
+    for heading in ("## Python", "## More than one machine"):
+        section = text.split(heading, 1)[1].split("\n## ", 1)[0]
+        found += re.findall(r"```pycon\n(.*?)```", section, flags=re.S)
+    return found
 
 
 def test_readme_has_python_examples():
@@ -21,10 +24,14 @@ def test_readme_has_python_examples():
 
 
 @pytest.mark.parametrize("index", range(len(blocks())))
-def test_readme_example(index):
+def test_readme_example(index, monkeypatch):
     source = blocks()[index]
     if "trimesh" in source:
         pytest.importorskip("trimesh", reason="SKIPPED: the README's trimesh example needs trimesh (pip install trimesh)")
+    if "dask" in source:
+        pytest.importorskip("distributed", reason="SKIPPED: the README's Dask example needs dask (pip install raypack[dask])")
+    # The examples name the repository's files relative to its root.
+    monkeypatch.chdir(REPO)
     test = doctest.DocTestParser().get_doctest(source, {}, f"README.md python block {index}", "README.md", 0)
     runner = doctest.DocTestRunner(optionflags=doctest.NORMALIZE_WHITESPACE)
     runner.run(test)

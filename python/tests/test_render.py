@@ -62,3 +62,38 @@ def test_scene_from_arrays_renders_as_the_same_ply(tmp_path):
     from_arrays = raypack.render(raypack.Scene(v, f), **SETTINGS)
     assert from_file.max() > 0 and np.array_equal(from_file, from_arrays)
     assert np.array_equal(from_file, cli_render(ply, tmp_path / "ball.exr"))
+
+
+def test_windows_are_the_whole_image_s_pixels():
+    """Any window's pixels are the whole image's, bit for bit: crop windows, pixel bounds and
+    the parts of ``tile_bounds`` (which tile the image), at one and two threads."""
+    v, f = uv_sphere(12, 24)
+    scene = raypack.Scene(v, f)
+    whole = raypack.render(scene, threads=2, **SETTINGS)
+    w, h = SETTINGS["width"], SETTINGS["height"]
+    for n in (1, 2, 7):
+        parts = raypack.tile_bounds(n, w, h)
+        assert len(parts) == n
+        image = np.full_like(whole, np.nan)
+        for i, (x0, x1, y0, y1) in enumerate(parts):
+            assert np.isnan(image[y0:y1, x0:x1]).all(), "the parts overlap"
+            image[y0:y1, x0:x1] = raypack.render(scene, pixel_bounds=(x0, x1, y0, y1), threads=1 + i % 2, **SETTINGS)
+        assert np.array_equal(image, whole)
+    crop = raypack.render(scene, crop_window=(0.25, 0.75, 0.5, 1.0), **SETTINGS)
+    assert np.array_equal(crop, whole[h // 2 :, w // 4 : 3 * w // 4])
+
+
+def test_bad_windows_name_the_argument():
+    v, f = uv_sphere(8, 8)
+    scene = raypack.Scene(v, f)
+    for kwargs, says in [
+        (dict(crop_window=(0.5, 0.5, 0.0, 1.0)), "crop_window"),
+        (dict(crop_window=(0.0, 2.0, 0.0, 1.0)), "crop_window"),
+        (dict(pixel_bounds=(0, 65, 0, 48)), "pixel_bounds"),
+        (dict(pixel_bounds=(3, 3, 0, 48)), "pixel_bounds"),
+        (dict(pixel_bounds=(0, 1, 0, 1), crop_window=(0.0, 1.0, 0.0, 1.0)), "not both"),
+    ]:
+        with pytest.raises(ValueError, match=says):
+            raypack.render(scene, **kwargs, **SETTINGS)
+    with pytest.raises(ValueError, match="cannot be split into 7 parts"):
+        raypack.tile_bounds(7, 6, 6)

@@ -1,0 +1,272 @@
+"""raypack on Dask: renders split into parts and ray batches split into chunks, on a
+``dask.distributed`` cluster when a client is active (a ``LocalCluster`` on one machine,
+``dask-jobqueue``'s ``SLURMCluster`` or ``PBSCluster`` on a batch system, ``dask-kubernetes``)
+and on Dask's local scheduler otherwise. Install with ``pip install raypack[dask]``.
+
+    >>> import raypack, raypack.dask
+    >>> image = raypack.dask.render("CBbunny.dae", 480, 360, spp=64, max_depth=5, tiles=8)
+    >>> hits = raypack.dask.intersect(scene, origins, directions)   # dask arrays
+    >>> t = hits.t.compute()
+
+The results do not depend on how the work is split: a render's parts are the pixels of
+``raypack.render(..., pixel_bounds=part)``, each bit for bit its value in the whole image, and
+a chunk's hits are ``Scene.intersect``'s for its rays.
+
+The scene goes to each worker once: on a cluster it is scattered to every worker
+(``Client.scatter(..., broadcast=True)``) and the tasks refer to it; its pickle holds the BVH
+(``len(pickle.dumps(scene))`` bytes), so no worker builds it again. A scene given as a path is
+loaded (and its BVH built, or read from ``bvh_cache``) once, on the client.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any, Literal, NamedTuple
+
+import numpy as np
+
+from . import _raypack
+
+__all__ = ["DaskHits", "intersect", "occluded", "render"]
+
+
+def _modules() -> tuple[Any, Any]:
+    """``dask`` and ``dask.array``, or an ImportError saying how to install them."""
+    try:
+        import dask
+        import dask.array
+    except ImportError as e:  # pragma: no cover - exercised without dask only
+        raise ImportError("raypack.dask needs Dask: pip install raypack[dask] (or dask[array,distributed])") from e
+    return dask, dask.array
+
+
+def _active_client(client: Any = None) -> Any:
+    """``client``, or the active ``dask.distributed`` client, or None (the local scheduler)."""
+    if client is not None:
+        return client
+    try:
+        from distributed import get_client
+    except ImportError:
+        return None
+    try:
+        return get_client()
+    except ValueError:
+        return None
+
+
+def _task_threads() -> int | None:
+    """Threads a task may use: the worker's (its tasks share one raypack thread pool of that
+    size), or None (all cores) outside a ``dask.distributed`` worker."""
+    try:
+        from distributed import get_worker
+
+        worker = get_worker()
+    except (ImportError, ValueError):
+        return None
+    state = getattr(worker, "state", None)
+    n = getattr(state, "nthreads", None) or getattr(worker, "nthreads", None)
+    return int(n) if n else None
+
+
+def _share(scene: Any, client: Any) -> Any:
+    """What tasks take for the scene: on a cluster a future of it on every worker (sent once
+    each), else the scene itself."""
+    if client is None:
+        return scene
+    return client.scatter(scene, broadcast=True, hash=False)
+
+
+_Quality = Literal["fast", "medium", "high"]
+_Integrator = Literal["global", "direct", "direct-only", "indirect-only", "bounce", "normals"]
+
+
+def _load(scene: Any, quality: _Quality, watertight: bool, bvh_cache: Any) -> _raypack.Scene:
+    if isinstance(scene, _raypack.Scene):
+        return scene
+    if isinstance(scene, (str, os.PathLike)):
+        return _raypack.load(scene, quality=quality, watertight=watertight, bvh_cache=bvh_cache)
+    raise TypeError(f"scene: expected a raypack.Scene or a path to a scene file, got {type(scene).__name__}")
+
+
+def _render_part(scene: _raypack.Scene, bounds: tuple[int, int, int, int], settings: dict[str, Any]) -> np.ndarray:
+    return _raypack.render(scene, pixel_bounds=bounds, threads=_task_threads(), **settings)
+
+
+def render(
+    scene: Any,
+    width: int = 480,
+    height: int = 360,
+    spp: int = 1,
+    *,
+    tiles: int | None = None,
+    max_depth: int = 1,
+    light_samples: int = 1,
+    seed: int = 0,
+    integrator: _Integrator = "global",
+    hemisphere: bool = False,
+    russian_roulette: bool = True,
+    quality: _Quality = "medium",
+    watertight: bool = False,
+    bvh_cache: Any = None,
+    client: Any = None,
+) -> np.ndarray:
+    """Renders ``scene`` (a ``raypack.Scene`` or a scene file's path) in ``tiles`` parts, one
+    task each, and returns the whole image: float32 ``(height, width, 3)``, bit for bit
+    ``raypack.render``'s with the same settings. The parts are ``raypack.tile_bounds(tiles,
+    width, height)`` (those of ``raypack render --tile I/N``); by default two per worker
+    thread of the cluster, or one per core on the local scheduler. ``client`` defaults to the
+    active ``dask.distributed`` client."""
+    dask, _ = _modules()
+    client = _active_client(client)
+    if tiles is None:
+        threads = sum(client.nthreads().values()) if client is not None else (os.cpu_count() or 1)
+        tiles = max(1, 2 * threads) if client is not None else max(1, threads)
+        # As many as the image allows, down to one pixel per part.
+        tiles = min(tiles, width * height)
+    bounds = _raypack.tile_bounds(tiles, width, height)
+    settings = dict(
+        width=width,
+        height=height,
+        spp=spp,
+        max_depth=max_depth,
+        light_samples=light_samples,
+        seed=seed,
+        integrator=integrator,
+        hemisphere=hemisphere,
+        russian_roulette=russian_roulette,
+    )
+    shared = _share(_load(scene, quality, watertight, bvh_cache), client)
+    parts = [dask.delayed(_render_part, pure=True)(shared, b, settings) for b in bounds]
+    computed = dask.compute(*parts) if client is None else client.compute(parts, sync=True)
+    image = np.empty((height, width, 3), dtype=np.float32)
+    for (x0, x1, y0, y1), pixels in zip(bounds, computed):
+        image[y0:y1, x0:x1] = pixels
+    return image
+
+
+class DaskHits(NamedTuple):
+    """``Scene.intersect``'s outputs as dask arrays, one chunk per chunk of rays: ``t``
+    (float32, ``inf`` on a miss), ``prim`` (int64, ``-1``), ``u``, ``v`` (float32) and
+    ``normal`` (float32 ``(K, 3)``)."""
+
+    t: Any
+    prim: Any
+    u: Any
+    v: Any
+    normal: Any
+
+    @property
+    def hit(self) -> Any:
+        """Whether each ray hit something: ``prim >= 0``."""
+        return self.prim >= 0
+
+
+def _intersect_chunk(scene: _raypack.Scene, rays: tuple[Any, ...]) -> tuple[np.ndarray, ...]:
+    origins, directions, tnear, tfar = rays
+    return tuple(scene.intersect(origins, directions, tnear, tfar, threads=_task_threads()))
+
+
+def _occluded_chunk(scene: _raypack.Scene, rays: tuple[Any, ...]) -> np.ndarray:
+    origins, directions, tnear, tfar = rays
+    return scene.occluded(origins, directions, tnear, tfar, threads=_task_threads())
+
+
+def _chunks(
+    origins: Any, directions: Any, tnear: Any, tfar: Any, chunk_rays: int, client: Any
+) -> tuple[list[Any], list[int]]:
+    """The rays as a list of ``(origins, directions, tnear, tfar)`` chunks (delayed values or
+    futures) and the rays in each. numpy inputs are cut into chunks of ``chunk_rays`` rays,
+    on a cluster each sent once to one worker; dask arrays keep their row chunks (the other
+    arrays are rechunked to them)."""
+    dask, da = _modules()
+    if chunk_rays < 1:
+        raise ValueError(f"chunk_rays: expected at least 1, got {chunk_rays}")
+    per_ray = [(name, x) for name, x in (("tnear", tnear), ("tfar", tfar)) if x is not None and np.ndim(x) > 0]
+    if isinstance(origins, da.Array) or isinstance(directions, da.Array):
+        o = da.asarray(origins)
+        if o.ndim != 2 or o.shape[1] != 3:
+            raise ValueError(f"origins: expected shape (K, 3), got {o.shape}")
+        o = o.rechunk({1: 3})
+        rows = o.chunks[0]
+        d = da.asarray(directions)
+        if d.shape != o.shape:
+            raise ValueError(f"directions: expected shape {o.shape} as origins, got {d.shape}")
+        d = d.rechunk((rows, 3))
+        extra = {name: da.asarray(x).rechunk((rows,)) for name, x in per_ray}
+        o_blocks, d_blocks = o.to_delayed().ravel(), d.to_delayed().ravel()
+        e_blocks = {name: x.to_delayed().ravel() for name, x in extra.items()}
+        chunks = []
+        for i in range(len(rows)):
+            tn = e_blocks["tnear"][i] if "tnear" in e_blocks else tnear
+            tf = e_blocks["tfar"][i] if "tfar" in e_blocks else tfar
+            chunks.append(dask.delayed(tuple, pure=True)([o_blocks[i], d_blocks[i], tn, tf]))
+        return chunks, list(rows)
+    o, d = np.asarray(origins), np.asarray(directions)
+    if o.ndim != 2 or o.shape[1] != 3:
+        raise ValueError(f"origins: expected shape (K, 3), got {o.shape}")
+    if d.shape != o.shape:
+        raise ValueError(f"directions: expected shape {o.shape} as origins, got {d.shape}")
+    arrays = {name: np.asarray(x) for name, x in per_ray}
+    for name, x in arrays.items():
+        if x.shape != (len(o),):
+            raise ValueError(f"{name}: expected a number or shape ({len(o)},), got {x.shape}")
+    pieces, rows = [], []
+    for start in range(0, len(o), chunk_rays):
+        end = min(start + chunk_rays, len(o))
+        tn = arrays["tnear"][start:end] if "tnear" in arrays else tnear
+        tf = arrays["tfar"][start:end] if "tfar" in arrays else tfar
+        pieces.append((o[start:end], d[start:end], tn, tf))
+        rows.append(end - start)
+    if client is not None:
+        # Each chunk straight to one worker, rather than the whole arrays into the graph.
+        return client.scatter(pieces), rows
+    return [dask.delayed(p, traverse=False) for p in pieces], rows
+
+
+def intersect(
+    scene: _raypack.Scene,
+    origins: Any,
+    directions: Any,
+    tnear: Any = None,
+    tfar: Any = None,
+    *,
+    chunk_rays: int = 1 << 20,
+    client: Any = None,
+) -> DaskHits:
+    """``scene.intersect(origins, directions, tnear, tfar)`` chunk by chunk, as dask arrays
+    (compute them, or persist them on the cluster). ``origins`` and ``directions`` are ``(K,
+    3)`` numpy or dask arrays; ``tnear`` and ``tfar`` numbers or ``(K,)`` arrays. Each chunk's
+    hits are ``Scene.intersect``'s for its rays; the scene goes to each worker once."""
+    dask, da = _modules()
+    client = _active_client(client)
+    shared = _share(scene, client)
+    chunks, rows = _chunks(origins, directions, tnear, tfar, chunk_rays, client)
+    outputs: list[list[Any]] = [[], [], [], [], []]
+    specs = [((), np.float32), ((), np.int64), ((), np.float32), ((), np.float32), ((3,), np.float32)]
+    for chunk, n in zip(chunks, rows):
+        hits = dask.delayed(_intersect_chunk, pure=True, nout=5)(shared, chunk)
+        for k, (tail, dtype) in enumerate(specs):
+            outputs[k].append(da.from_delayed(hits[k], shape=(n, *tail), dtype=dtype))
+    return DaskHits(*(da.concatenate(o) for o in outputs))
+
+
+def occluded(
+    scene: _raypack.Scene,
+    origins: Any,
+    directions: Any,
+    tnear: Any = None,
+    tfar: Any = None,
+    *,
+    chunk_rays: int = 1 << 20,
+    client: Any = None,
+) -> Any:
+    """``scene.occluded(...)`` chunk by chunk, as a dask bool array (see ``intersect``)."""
+    dask, da = _modules()
+    client = _active_client(client)
+    shared = _share(scene, client)
+    chunks, rows = _chunks(origins, directions, tnear, tfar, chunk_rays, client)
+    blocks = [
+        da.from_delayed(dask.delayed(_occluded_chunk, pure=True)(shared, chunk), shape=(n,), dtype=bool)
+        for chunk, n in zip(chunks, rows)
+    ]
+    return da.concatenate(blocks)
