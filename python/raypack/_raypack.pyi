@@ -161,6 +161,8 @@ class Scene:
     def faces(self) -> npt.NDArray[np.int64]:
         """The committed triangles ``(M, 3)`` int64 (a copy). A loaded scene's ``prim`` ids
         index these rows."""
+    def __dask_tokenize__(self) -> str:
+        """A token of the scene's contents, for Dask."""
     def __reduce__(self) -> tuple[object, tuple[bytes, bytes | None, tuple[int, int, int, int, int]]]:
         """Pickling: the scene travels whole, BVH included (about the BVH's size plus the
         geometry's), and is checked on unpickling as a cache file from another user is; an

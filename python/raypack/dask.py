@@ -68,12 +68,26 @@ def _task_threads() -> int | None:
     return int(n) if n else None
 
 
+# Scenes on clusters: (id of the client, the scene's token) -> the future of the scattered
+# scene, so that calls with the same scene send it only once. The last few are kept (each
+# holds its scene in the cluster's memory until the client closes).
+_SHARED: dict[tuple[int, str], Any] = {}
+_SHARED_KEPT = 4
+
+
 def _share(scene: Any, client: Any) -> Any:
     """What tasks take for the scene: on a cluster a future of it on every worker (sent once
-    each), else the scene itself."""
+    each, and once per session), else the scene itself."""
     if client is None:
         return scene
-    return client.scatter(scene, broadcast=True, hash=False)
+    key = (id(client), scene.__dask_tokenize__())
+    future = _SHARED.get(key)
+    if future is None or future.status != "finished":
+        future = client.scatter(scene, broadcast=True, hash=False)
+        _SHARED[key] = future
+        while len(_SHARED) > _SHARED_KEPT:
+            del _SHARED[next(iter(_SHARED))]
+    return future
 
 
 _Quality = Literal["fast", "medium", "high"]

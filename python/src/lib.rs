@@ -433,6 +433,20 @@ impl PyScene {
         format!("<raypack.Scene: {} triangles, {} spheres>", self.scene.num_triangles(), self.scene.num_spheres())
     }
 
+    /// A token of the scene's contents for Dask (``dask.base.tokenize``): equal for scenes
+    /// that trace and render alike, so that a scene sent to a cluster is found there again
+    /// instead of being hashed through its pickle.
+    fn __dask_tokenize__(&self) -> String {
+        let s = &self.scene;
+        let mut h = xxhash_rust::xxh3::Xxh3::new();
+        h.update(&raypack::render::part::scene_digest(s).to_le_bytes());
+        h.update(format!("{:?} {:?} {:?}", s.camera, self.opts, self.prim_map.as_ref().map(|m| m.len())).as_bytes());
+        if let Some(m) = &self.prim_map {
+            h.update(&u32_bytes(m));
+        }
+        format!("raypack.Scene-{:032x}", h.digest128())
+    }
+
     /// Pickling: the scene travels whole, BVH included, so that a process unpickling it
     /// (a Dask worker) never builds it again. The bytes are a snapshot in the BVH cache's
     /// layout (about the BVH's size plus the geometry's; `len(pickle.dumps(scene))`), checked

@@ -4,6 +4,8 @@ scene goes to each worker once and no worker builds its BVH."""
 
 from __future__ import annotations
 
+import pickle
+
 import numpy as np
 import pytest
 
@@ -66,6 +68,15 @@ def test_cluster_intersect_of_2m_rays_in_8_chunks_equals_intersect(client):
     for name, a, b in zip(raypack.dask.DaskHits._fields, got, want):
         assert np.array_equal(a, b), name
     assert got.hit.sum() > 100_000
+    # The scene is on each worker once, however many calls used it.
+    raypack.dask.intersect(scene, origins[:1000], directions[:1000]).t.compute()
+    token = scene.__dask_tokenize__()
+    assert token == pickle.loads(pickle.dumps(scene)).__dask_tokenize__()
+
+    def copies(dask_worker):
+        return sum(isinstance(v, raypack.Scene) and v.__dask_tokenize__() == token for v in dask_worker.data.values())
+
+    assert list(client.run(copies).values()) == [1, 1]
     # As dask arrays in (chunked differently), with per-ray tfar: the same.
     da = pytest.importorskip("dask.array")
     origins, directions = origins[:200_000], directions[:200_000]
