@@ -346,7 +346,9 @@ impl EmbreeScene {
         }
     }
 
-    /// Occlusion of `rays` over `(tnear, tfar]` into `out` with `rtcOccluded{1,8,16}`.
+    /// Occlusion of `rays` over `[tnear, tfar]` into `out` with `rtcOccluded{1,8,16}` (Embree
+    /// documents no guarantee for hits at exactly `tnear`: its robust mode counts them, the
+    /// default mode of Embree 3 does not).
     ///
     /// # Panics
     /// When `out` is shorter than `rays`.

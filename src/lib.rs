@@ -24,7 +24,9 @@
 //! ## Queries
 //!
 //! In the style of Embree: `intersect*` finds the closest hit, `occluded*` answers whether
-//! anything lies on a segment; the suffix says how many rays a call takes.
+//! anything lies on a segment; the suffix says how many rays a call takes. A ray covers `t` in
+//! `[tnear, tfar]`, both ends included: a ray that starts on a surface with `tnear = 0` hits
+//! it at `t = 0` ([`ray`]).
 //!
 //! | call | rays | best for |
 //! |---|---|---|

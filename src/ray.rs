@@ -1,12 +1,16 @@
 //! Rays and hit records.
 //!
-//! A [`Ray`] is valid for parameters `t` in the open-closed interval `(tnear, tfar]`, the same
-//! convention Embree uses: a hit at exactly `tnear` is rejected, one at exactly `tfar` is kept.
+//! A [`Ray`] covers the parameters `t` in the closed interval `[tnear, tfar]`: a hit at exactly
+//! `tnear` counts, and so does one at exactly `tfar`. A ray that starts on a surface with
+//! `tnear = 0` hits it at `t = 0`, as trimesh's ray engines and Embree's robust mode (its
+//! watertight test, `RTC_SCENE_FLAG_ROBUST`) count it; Embree documents the interval as
+//! `[tnear, tfar]` without a guarantee at its ends, and its default test in Embree 3 leaves a
+//! hit at exactly `tnear` out. Hit distances are never `-0.0` (a hit at the origin is `+0.0`).
 //! Directions need not be normalised; `t` is measured in units of `|dir|`.
 
 use crate::math::{Vec3, safe_recip3};
 
-/// A ray `origin + t * dir` for `t` in `(tnear, tfar]`.
+/// A ray `origin + t * dir` for `t` in `[tnear, tfar]`.
 ///
 /// `repr(C)`: eight consecutive `f32` (origin, direction, `tnear`, `tfar`), so that packet
 /// kernels can transpose rays into lanes with vector shuffles ([`transpose_rays`]).
@@ -17,20 +21,20 @@ pub struct Ray {
     pub origin: Vec3,
     /// Direction (any length except zero; `t` is in units of its length).
     pub dir: Vec3,
-    /// Hits at `t <= tnear` are ignored.
+    /// Hits at `t < tnear` are ignored (`t = tnear` counts).
     pub tnear: f32,
     /// Hits at `t > tfar` are ignored; closest-hit queries shrink it to the hit found.
     pub tfar: f32,
 }
 
 impl Ray {
-    /// A ray over `(0, +inf]`.
+    /// A ray over `[0, +inf]`: from its origin on, a surface there included.
     #[inline]
     pub fn new(origin: Vec3, dir: Vec3) -> Self {
         Self { origin, dir, tnear: 0.0, tfar: f32::INFINITY }
     }
 
-    /// A ray over `(tnear, tfar]`.
+    /// A ray over `[tnear, tfar]`.
     #[inline]
     pub fn segment(origin: Vec3, dir: Vec3, tnear: f32, tfar: f32) -> Self {
         Self { origin, dir, tnear, tfar }

@@ -9,7 +9,7 @@
 //! * Valid rays (including ±0.0 direction components, `tnear == tfar`, `tnear = tfar = +inf`,
 //!   origins on a surface, coordinates up to 1e18 and directions down to 1e-30) get exactly the
 //!   reference traversal's and brute force's answer in every kernel, and every hit has a finite
-//!   `t` in `(tnear, tfar]`, finite `u`, `v` and an existing primitive id. From origins 1e18
+//!   `t` in `[tnear, tfar]` (never `-0.0`), finite `u`, `v` and an existing primitive id. From origins 1e18
 //!   away (beyond 1e12), where the origin's rounding dwarfs the scene and hits are rounding
 //!   noise, only the last properties hold, not agreement between traversals.
 //! * Nothing panics or hangs: every batch runs on a worker thread that must finish within a
@@ -153,7 +153,8 @@ fn check(scene: &Scene, named: &[(String, Ray)]) -> (usize, usize) {
             let noise = r.origin.abs().max_element() > 1e12;
             if noise {
                 if h.is_hit() && !query.contains("occluded") {
-                    assert!(h.t > r.tnear && h.t <= r.tfar && h.t.is_finite(), "{what}: t outside (tnear, tfar]");
+                    assert!(h.t >= r.tnear && h.t <= r.tfar && h.t.is_finite(), "{what}: t outside [tnear, tfar]");
+                    assert_ne!(h.t.to_bits(), (-0.0f32).to_bits(), "{what}: t = -0.0");
                     assert!(h.u.is_finite() && h.v.is_finite(), "{what}: u, v not finite");
                 }
                 continue;
@@ -164,13 +165,14 @@ fn check(scene: &Scene, named: &[(String, Ray)]) -> (usize, usize) {
             }
             assert_eq!(h.is_hit(), want.is_hit(), "{what}: reference gave {want:?}");
             if h.is_hit() {
-                assert!(h.t > r.tnear && h.t <= r.tfar && h.t.is_finite(), "{what}: t outside (tnear, tfar]");
+                assert!(h.t >= r.tnear && h.t <= r.tfar && h.t.is_finite(), "{what}: t outside [tnear, tfar]");
+                assert_ne!(h.t.to_bits(), (-0.0f32).to_bits(), "{what}: t = -0.0");
                 assert!(h.u.is_finite() && h.v.is_finite(), "{what}: u, v not finite");
                 assert!((h.prim as usize) < scene.num_prims(), "{what}: no such primitive");
                 assert_eq!(h.t.to_bits(), want.t.to_bits(), "{what}: t differs from the reference {want:?}");
             }
         }
-        // Occluded over (tnear, tfar] exactly when the closest hit exists.
+        // Occluded over [tnear, tfar] exactly when the closest hit exists.
         if r.origin.abs().max_element() > 1e12 {
             continue;
         }

@@ -64,7 +64,7 @@ impl Bvh2 {
         std::mem::size_of_val(self.nodes.as_slice()) + std::mem::size_of_val(self.prim_ids.as_slice())
     }
 
-    /// Closest hit. `test(prim, tfar)` intersects one primitive over `(ray.tnear, tfar]` and
+    /// Closest hit. `test(prim, tfar)` intersects one primitive over `[ray.tnear, tfar]` and
     /// returns `(t, u, v)`; the traversal keeps the nearest.
     pub fn intersect(&self, ray: &Ray, mut test: impl FnMut(u32, f32) -> Option<(f32, f32, f32)>) -> Hit {
         let mut hit = Hit::MISS;
@@ -125,7 +125,7 @@ impl Bvh2 {
         }
     }
 
-    /// Any hit: true as soon as `test(prim)` reports a hit in `(ray.tnear, ray.tfar]`.
+    /// Any hit: true as soon as `test(prim)` reports a hit in `[ray.tnear, ray.tfar]`.
     pub fn occluded(&self, ray: &Ray, mut test: impl FnMut(u32) -> bool) -> bool {
         if !ray.is_valid() || self.is_empty() {
             return false;

@@ -79,7 +79,7 @@ impl<T: TriBlock, C: Counter> IsaOp for Intersect1<'_, T, C> {
     fn run<I: IsaLanes>(self) -> Hit {
         let mut hit = Hit::MISS;
         if let Some(r) = Ray1::<I::F8>::try_new(self.ray) {
-            let (bvh, mut tfar) = (self.bvh.slices(), self.ray.tfar);
+            let (bvh, mut tfar) = (self.bvh.slices(), r.ray.tfar);
             let root = bvh.root();
             if self.bvh.speculates() {
                 with_kernel!(bvh.test, P => bvh.intersect1_from::<I, P, C, true>(&r, root, &mut tfar, &mut hit, self.counter));
@@ -433,7 +433,7 @@ impl<T: TriBlock> Bvh8<T> {
         self.intersect1_with(Isa::default_for_process(), ray, &mut NoCount)
     }
 
-    /// True when anything lies in `(ray.tnear, ray.tfar]`, on the process's default ISA.
+    /// True when anything lies in `[ray.tnear, ray.tfar]`, on the process's default ISA.
     /// Invalid rays are never occluded.
     #[inline]
     pub fn occluded1(&self, ray: &Ray) -> bool {

@@ -109,9 +109,10 @@ impl<V: Lanes> Ray1<V> {
         let recip = safe_recip_lanes(v); // lanes 3-5 are the direction's
         let inv = Vec3::new(recip.lane(3), recip.lane(4), recip.lane(5));
         let neg = recip.lt(V::splat(0.0)).bitmask();
-        // `+ 0.0` turns a `tnear` of `-0.0` into `+0.0` (see `intersect_node`), in the ray
-        // itself so that the node and the triangle tests share one value.
-        let ray = Ray { tnear: ray.tnear + 0.0, ..*ray };
+        // `+ 0.0` turns a `tnear` or `tfar` of `-0.0` into `+0.0` (see `intersect_node`), in
+        // the ray itself so that the node and the triangle tests share one value; callers start
+        // the closest-hit search from `ray.tfar` of the result.
+        let ray = Ray { tnear: ray.tnear + 0.0, tfar: ray.tfar + 0.0, ..*ray };
         Self {
             ray,
             org: Vec3x::splat(ray.origin),
@@ -122,7 +123,7 @@ impl<V: Lanes> Ray1<V> {
         }
     }
 
-    /// Slab test against the eight child boxes of `n` over `(tnear, tfar]`: bit `i` of the mask
+    /// Slab test against the eight child boxes of `n` over `[tnear, tfar]`: bit `i` of the mask
     /// is set when child `i` is hit, and lane `i` of the result is its entry distance.
     ///
     /// The exit distances are widened by [`SLAB_WIDEN`] (Ize's robust traversal) through the
@@ -136,12 +137,15 @@ impl<V: Lanes> Ray1<V> {
     /// distances' bits as integers ([`Lanes::max_bits`]: `vpmaxsd`, `vpminsd`, `vpcmpgtd`, one
     /// cycle each where the float forms take two to four), as Embree's kernels do; on SSE2,
     /// where those take three or four instructions each, they stay floats. Both give the
-    /// same hits: `tnear` is `+0.0` or more (a `-0.0` is made `+0.0` in [`Ray1::new`]) and
-    /// the reciprocal is finite, so no lane is NaN, the entry distance `tn` is the float
-    /// maximum, and a negative float reads as a negative integer, below every `tn`. The one
-    /// difference, an exit distance of `-0.0` against an entry of `+0.0` (a miss for the
-    /// integers, a hit for the floats), is a box the ray leaves exactly at its origin, where
-    /// no hit beyond `tnear` can lie (the subtraction is exact when it gives zero).
+    /// same hits: `tnear` is `+0.0` or more (a `-0.0` is made `+0.0` in [`Ray1::new`], and
+    /// so is a `tfar` of `-0.0`; hit distances are never `-0.0`) and the reciprocal is finite,
+    /// so no lane is NaN, the entry distance `tn` is the float maximum, and a negative float
+    /// reads as a negative integer, below every `tn`. The one difference, an exit distance of
+    /// `-0.0` against an entry of `+0.0` (a miss for the integers, a hit for the floats), is a
+    /// box the ray leaves exactly at its origin (the subtraction is exact when it gives zero),
+    /// where no hit can lie, not even one at `t = 0`: node boxes are padded outward
+    /// ([`crate::bvh::build_sah::pad_outward`]), so every primitive lies strictly inside its
+    /// box and no point of it on the box's boundary.
     // Callgrind cannot see latency; wall clock, CS184 beetle diffuse rays, single-ray kernel
     // on AVX2, 1 thread: see the commit that made it.
     //
@@ -574,7 +578,7 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
         }
     }
 
-    /// True when something in `leaf` blocks the ray `r` over `(tnear, tfar]` (`pre`, `tnear`,
+    /// True when something in `leaf` blocks the ray `r` over `[tnear, tfar]` (`pre`, `tnear`,
     /// `tfar`: the triangle test's constants of `r` and its interval, in lanes).
     #[inline(always)]
     pub(crate) fn occluded_leaf1<I: IsaLanes, P: TriangleKernel, C: Counter>(
@@ -789,6 +793,7 @@ mod tests {
                 assert_eq!(r.near, near, "{}: {ray:?}", I::ISA);
                 let tnear = (ray.tnear + 0.0).to_bits();
                 assert_eq!((r.ray.tnear.to_bits(), r.tnear.lane(3).to_bits()), (tnear, tnear), "{}: {ray:?}", I::ISA);
+                assert_eq!(r.ray.tfar.to_bits(), (ray.tfar + 0.0).to_bits(), "{}: {ray:?}", I::ISA);
                 let n = Ray1::<I::F8>::new(&ray);
                 assert_eq!((lanes(&n.inv), n.near), (lanes(&r.inv), r.near), "{}: {ray:?}", I::ISA);
             }

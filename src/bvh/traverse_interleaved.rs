@@ -67,7 +67,8 @@ impl<I: IsaLanes, T: TriBlock, P: TriangleKernel> Flight<I, T, P> for Closest<I,
 
     #[inline(always)]
     fn start(bvh: &Bvh8Ref<'_, T>, ray: &Ray) -> Self {
-        Self { r: Ray1::new(ray), pre: P::ray1(ray), tfar: ray.tfar, hit: Hit::MISS, cur: bvh.root(), sp: 0 }
+        let r = Ray1::new(ray);
+        Self { tfar: r.ray.tfar, r, pre: P::ray1(ray), hit: Hit::MISS, cur: bvh.root(), sp: 0 }
     }
 
     #[inline(always)]

@@ -350,10 +350,10 @@ pub fn intersect_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C
             if active.count_ones() as usize <= threshold {
                 counter.add(Work::FallbackRays, active.count_ones());
                 for i in crate::simd::bits(active) {
-                    let r = rays.ray(i);
-                    let mut tfar = r.tfar;
+                    let r = Ray1::new(&rays.ray(i));
+                    let mut tfar = r.ray.tfar;
                     let mut hit = Hit::MISS;
-                    bvh.intersect1_from::<I, P, C, false>(&Ray1::new(&r), cur, &mut tfar, &mut hit, counter);
+                    bvh.intersect1_from::<I, P, C, false>(&r, cur, &mut tfar, &mut hit, counter);
                     if hit.is_hit() {
                         rays.set_lane(i, &hit);
                     }

@@ -5,8 +5,8 @@ use crate::math::Vec3;
 
 /// Intersects the ray with the sphere `|p - center| = radius`.
 ///
-/// Returns the nearest root `t` in `(tnear, tfar]` (the far root when the origin is inside),
-/// or `None`.
+/// Returns the nearest root `t` in `[tnear, tfar]` (the far root when the origin is inside),
+/// or `None`. A root at the origin is `t = +0.0`, never `-0.0`.
 #[inline]
 pub fn intersect_sphere(origin: Vec3, dir: Vec3, tnear: f32, tfar: f32, center: Vec3, radius: f32) -> Option<f32> {
     let f = origin - center;
@@ -26,11 +26,13 @@ pub fn intersect_sphere(origin: Vec3, dir: Vec3, tnear: f32, tfar: f32, center: 
     if t0 > t1 {
         std::mem::swap(&mut t0, &mut t1);
     }
+    // `+ 0.0`: a root at the origin (`c = 0`) may come out as `-0.0`; made `+0.0`.
+    let (t0, t1) = (t0 + 0.0, t1 + 0.0);
     // `t < inf`: `sqrt(a disc)` overflows when `|dir| radius` exceeds ~1.8e19, and the root
     // at infinity is no hit.
-    if t0 > tnear && t0 <= tfar && t0 < f32::INFINITY {
+    if t0 >= tnear && t0 <= tfar && t0 < f32::INFINITY {
         Some(t0)
-    } else if t1 > tnear && t1 <= tfar && t1 < f32::INFINITY {
+    } else if t1 >= tnear && t1 <= tfar && t1 < f32::INFINITY {
         Some(t1)
     } else {
         None
@@ -59,6 +61,22 @@ mod tests {
         assert_eq!(intersect_sphere(Vec3::ZERO, Vec3::Z, 4.5, 100.0, c, 1.0), Some(6.0));
         assert_eq!(intersect_sphere(Vec3::ZERO, Vec3::Z, 0.0, 3.9, c, 1.0), None);
         assert_eq!(intersect_sphere(Vec3::ZERO, Vec3::X, 0.0, 100.0, c, 1.0), None);
+        // Roots at exactly tnear count.
+        assert_eq!(intersect_sphere(Vec3::ZERO, Vec3::Z, 4.0, 100.0, c, 1.0), Some(4.0));
+        assert_eq!(intersect_sphere(Vec3::ZERO, Vec3::Z, 4.0f32.next_up(), 100.0, c, 1.0), Some(6.0));
+    }
+
+    #[test]
+    fn a_ray_starting_on_the_sphere_hits_it_at_t_zero() {
+        // From the north pole: outward the root at the origin (t = +0.0, never -0.0); inward
+        // the same root first, the far side beyond it with tnear > 0.
+        let (c, north) = (Vec3::new(0.0, 0.0, 5.0), Vec3::new(0.0, 0.0, 6.0));
+        for d in [Vec3::Z, -Vec3::Z, Vec3::new(1.0, 0.0, 0.5)] {
+            let t = intersect_sphere(north, d, 0.0, 100.0, c, 1.0).map(f32::to_bits);
+            assert_eq!(t, Some(0.0f32.to_bits()), "{d}");
+        }
+        assert_eq!(intersect_sphere(north, -Vec3::Z, 1e-6, 100.0, c, 1.0), Some(2.0));
+        assert_eq!(intersect_sphere(north, Vec3::Z, 1e-6, 100.0, c, 1.0), None);
     }
 
     #[test]

@@ -12,7 +12,8 @@ use crate::math::Vec3;
 use crate::simd::{Lanes, Vec3x};
 
 /// Rays against spheres lane by lane (either side may be a broadcast): `(hit mask, t)`.
-/// The nearest root in `(tnear, tfar]`, the far one when the near one is outside it.
+/// The nearest root in `[tnear, tfar]`, the far one when the near one is outside it; a root
+/// at the origin is `+0.0`.
 #[inline(always)]
 pub fn sphere_lanes<V: Lanes>(
     origin: &Vec3x<V>,
@@ -35,10 +36,11 @@ pub fn sphere_lanes<V: Lanes>(
     let q = -(half_b + sq.copysign(half_b));
     let (t0, t1) = (c / q, q / a);
     let swap = t0.gt(t1);
-    let (near, far) = (swap.select(t1, t0), swap.select(t0, t1));
+    let zero = V::splat(0.0);
+    let (near, far) = (swap.select(t1, t0) + zero, swap.select(t0, t1) + zero);
     let inf = V::splat(f32::INFINITY);
-    let near_ok = near.gt(tnear) & near.le(tfar) & near.lt(inf);
-    let far_ok = far.gt(tnear) & far.le(tfar) & far.lt(inf);
+    let near_ok = near.ge(tnear) & near.le(tfar) & near.lt(inf);
+    let far_ok = far.ge(tnear) & far.le(tfar) & far.lt(inf);
     let t = near_ok.select(near, far);
     (disc_ok & (near_ok | far_ok), t)
 }

@@ -31,8 +31,9 @@ use crate::simd::{IsaLanes, Lanes, Vec3x};
 
 /// Intersects rays with triangles lane by lane: ray lane `i` against triangle lane `i`
 /// (either side may be a broadcast). Returns `(hit mask, t, u, v)`; a lane hits when
-/// `t` lies in `(tnear, tfar]`, `u, v >= 0`, `u + v <= 1` and the determinant is finite and
-/// non-zero — exactly the conditions of [`intersect_triangle_edges`].
+/// `t` lies in `[tnear, tfar]`, `u, v >= 0`, `u + v <= 1` and the determinant is finite and
+/// non-zero — exactly the conditions of [`intersect_triangle_edges`] (and, like it, a hit at
+/// the origin is `t = +0.0`).
 ///
 /// The division is skipped when no lane can pass: Embree's division-free comparisons of the
 /// unscaled `U, V, T` against `|det|` (with their signs flipped by `det`'s) decide, with a
@@ -109,7 +110,7 @@ pub(crate) fn moller_trumbore_with<V: Lanes>(
     let maybe = u1.ge(lo)
         & v1.ge(lo)
         & (u1 + v1).le(hi)
-        & t1.gt(tnear * V::splat(1.0 - SLACK) * a)
+        & t1.ge(tnear * V::splat(1.0 - SLACK) * a)
         & t1.le(tfar * a * V::splat(1.0 + SLACK));
     // A non-finite U or V fails the exact test too (u or v is then infinite or NaN), so only
     // T needs the exact path when it is not finite (its f64 redo below).
@@ -132,7 +133,8 @@ pub(crate) fn moller_trumbore_with<V: Lanes>(
         let origin = *origin;
         t = redo(t, overflow, inv_det, e2, &q, &origin);
     }
-    let valid = det_ok & inside & t.gt(tnear) & t.le(tfar) & t.lt(V::splat(f32::INFINITY));
+    let t = t + zero; // `-0.0` made `+0.0`, as the reference does
+    let valid = det_ok & inside & t.ge(tnear) & t.le(tfar) & t.lt(V::splat(f32::INFINITY));
     (valid, t, u, v)
 }
 

@@ -6,8 +6,9 @@ use crate::math::Vec3;
 
 /// Intersects the ray `origin + t dir` with triangle `(v0, v1, v2)`.
 ///
-/// Returns `(t, u, v)` with `p = (1-u-v) v0 + u v1 + v v2` when `t` lies in `(tnear, tfar]`
-/// and `u, v >= 0`, `u + v <= 1`; `None` otherwise (and for degenerate triangles).
+/// Returns `(t, u, v)` with `p = (1-u-v) v0 + u v1 + v v2` when `t` lies in `[tnear, tfar]`
+/// and `u, v >= 0`, `u + v <= 1`; `None` otherwise (and for degenerate triangles). A hit at
+/// the origin is `t = +0.0`, never `-0.0` ([`crate::ray`]).
 #[inline]
 pub fn intersect_triangle(
     origin: Vec3,
@@ -54,7 +55,10 @@ pub fn intersect_triangle_edges(
     if !t.is_finite() {
         t = t_f64(e2, q, inv_det);
     }
-    if t > tnear && t <= tfar && t < f32::INFINITY { Some((t, u, v)) } else { None }
+    // `+ 0.0` turns a `-0.0` (a hit exactly at the origin) into `+0.0` and leaves every other
+    // value as it is.
+    let t = t + 0.0;
+    if t >= tnear && t <= tfar && t < f32::INFINITY { Some((t, u, v)) } else { None }
 }
 
 /// `e2 · q * inv_det` in double precision, rounded to `f32`: the fallback when the `f32` dot
@@ -90,11 +94,23 @@ mod tests {
     #[test]
     fn respects_interval_and_edges() {
         let o = Vec3::new(0.25, 0.25, 1.0);
-        assert!(intersect_triangle(o, -Vec3::Z, 1.0, 10.0, V0, V1, V2).is_none(), "t == tnear is excluded");
+        assert!(intersect_triangle(o, -Vec3::Z, 1.0, 10.0, V0, V1, V2).is_some(), "t == tnear is included");
+        assert!(intersect_triangle(o, -Vec3::Z, 1.0f32.next_up(), 10.0, V0, V1, V2).is_none());
         assert!(intersect_triangle(o, -Vec3::Z, 0.0, 1.0, V0, V1, V2).is_some(), "t == tfar is included");
         assert!(intersect_triangle(o, -Vec3::Z, 0.0, 0.5, V0, V1, V2).is_none());
         assert!(intersect_triangle(Vec3::new(0.6, 0.6, 1.0), -Vec3::Z, 0.0, 9.0, V0, V1, V2).is_none());
         assert!(intersect_triangle(o, Vec3::X, 0.0, 9.0, V0, V1, V2).is_none(), "parallel ray");
         assert!(intersect_triangle(o, -Vec3::Z, 0.0, 9.0, V0, V1, V1).is_none(), "degenerate triangle");
+    }
+
+    #[test]
+    fn a_ray_starting_on_the_triangle_hits_it_at_t_zero() {
+        // From a point of the triangle, leaving it either way: t = +0.0 (tnear = 0 counts), with
+        // the barycentrics of that point. Upward, `e2 . q * (1 / det)` is `0 * -1 = -0.0`.
+        for d in [-Vec3::Z, Vec3::Z, Vec3::new(0.3, -0.2, 1.0)] {
+            let (t, u, v) = intersect_triangle(Vec3::new(0.25, 0.5, 0.0), d, 0.0, 10.0, V0, V1, V2).unwrap();
+            assert_eq!((t.to_bits(), u, v), (0.0f32.to_bits(), 0.25, 0.5), "{d}");
+            assert!(intersect_triangle(Vec3::new(0.25, 0.5, 0.0), d, 1e-6, 10.0, V0, V1, V2).is_none());
+        }
     }
 }

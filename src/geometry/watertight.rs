@@ -55,9 +55,9 @@ pub fn edge_functions_f64(ax: f32, ay: f32, bx: f32, by: f32, cx: f32, cy: f32) 
 
 /// Intersects the ray `origin + t dir` with triangle `(v0, v1, v2)`, watertight.
 ///
-/// Returns `(t, u, v)` with `p = (1-u-v) v0 + u v1 + v v2` when `t` lies in `(tnear, tfar]`
+/// Returns `(t, u, v)` with `p = (1-u-v) v0 + u v1 + v v2` when `t` lies in `[tnear, tfar]`
 /// and the ray passes inside or on the edges; `None` otherwise (and for triangles degenerate
-/// as seen along the ray).
+/// as seen along the ray). A hit at the origin is `t = +0.0`, never `-0.0`.
 #[inline]
 pub fn intersect_triangle_watertight(
     origin: Vec3,
@@ -93,8 +93,9 @@ pub fn intersect_triangle_watertight(
     if !t.is_finite() {
         t = t_f64([u, v, w], [az, bz, cz], inv_det);
     }
+    let t = t + 0.0; // `-0.0` (a hit at the origin) made `+0.0`, as Möller–Trumbore does
     let ok = inv_det.is_finite() && t < f32::INFINITY;
-    if ok && t > tnear && t <= tfar { Some((t, v * inv_det, w * inv_det)) } else { None }
+    if ok && t >= tnear && t <= tfar { Some((t, v * inv_det, w * inv_det)) } else { None }
 }
 
 /// `(U Az + V Bz + W Cz) * inv_det` in double precision, rounded to `f32`: the fallback when
@@ -161,7 +162,8 @@ pub fn watertight<V: Lanes>(
     if overflow != 0 {
         t = redo_t_f64(t, overflow, [u, v, w], [az, bz, cz], inv_det);
     }
-    let valid = maybe & inv_det.is_finite() & t.lt(V::splat(f32::INFINITY)) & t.gt(tnear) & t.le(tfar);
+    let t = t + zero;
+    let valid = maybe & inv_det.is_finite() & t.lt(V::splat(f32::INFINITY)) & t.ge(tnear) & t.le(tfar);
     (valid, t, v * inv_det, w * inv_det)
 }
 
@@ -242,7 +244,13 @@ mod tests {
         assert_eq!(intersect_triangle_watertight(o, -Vec3::Z, 0.0, 10.0, V0, V1, V2), Some((1.0, 0.25, 0.5)));
         let (t, ..) = intersect_triangle_watertight(Vec3::new(0.25, 0.5, -2.0), Vec3::Z, 0.0, 9.0, V0, V1, V2).unwrap();
         assert_eq!(t, 2.0);
-        assert!(intersect_triangle_watertight(o, -Vec3::Z, 1.0, 10.0, V0, V1, V2).is_none(), "t == tnear");
+        assert!(intersect_triangle_watertight(o, -Vec3::Z, 1.0, 10.0, V0, V1, V2).is_some(), "t == tnear");
+        assert!(intersect_triangle_watertight(o, -Vec3::Z, 1.0f32.next_up(), 10.0, V0, V1, V2).is_none());
+        // From a point of the triangle, either way: t = +0.0.
+        for d in [-Vec3::Z, Vec3::Z, Vec3::new(0.3, -0.2, 1.0)] {
+            let h = intersect_triangle_watertight(Vec3::new(0.25, 0.5, 0.0), d, 0.0, 9.0, V0, V1, V2);
+            assert_eq!(h.map(|(t, ..)| t.to_bits()), Some(0.0f32.to_bits()), "{d}");
+        }
         assert!(intersect_triangle_watertight(o, -Vec3::Z, 0.0, 1.0, V0, V1, V2).is_some(), "t == tfar");
         assert!(intersect_triangle_watertight(Vec3::new(0.6, 0.6, 1.0), -Vec3::Z, 0.0, 9.0, V0, V1, V2).is_none());
         assert!(intersect_triangle_watertight(o, Vec3::X, 0.0, 9.0, V0, V1, V2).is_none(), "parallel");

@@ -10,10 +10,11 @@
 //!   order, the same 8 values per row; format versions 1.0, 2.0 and 3.0 are read, 1.0 is
 //!   written (`numpy.save(path, a.astype("<f4"))`).
 //!
-//! A ray covers `t ∈ (tnear, tfar]` in units of `|dir|` (`tfar` may be `+inf`, written as
+//! A ray covers `t ∈ [tnear, tfar]` in units of `|dir|` (`tfar` may be `+inf`, written as
 //! the IEEE infinity). Every ray read must be valid ([`Ray::is_valid`]): finite origin and
 //! direction, a non-zero direction, `0 <= tnear <= tfar`; a file with an invalid ray is an
-//! error naming the ray's index, not a set in which some rays silently miss.
+//! error naming the ray's index, not a set in which some rays silently miss (the Python
+//! module likewise raises a `ValueError` for a negative `tnear` or `tfar`).
 
 use crate::math::Vec3;
 use crate::ray::Ray;

@@ -44,7 +44,7 @@ impl<'a> Tracer<'a> {
         }
     }
 
-    /// Occlusion of a batch of rays over `(tnear, tfar]`: `occluded[i]` for `rays[i]` (same
+    /// Occlusion of a batch of rays over `[tnear, tfar]`: `occluded[i]` for `rays[i]` (same
     /// length), on the calling thread, with the packets' occluder cache carried along.
     pub fn occluded_batch(&self, rays: &[Ray], occluded: &mut [bool]) {
         debug_assert_eq!(rays.len(), occluded.len());

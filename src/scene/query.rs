@@ -59,7 +59,7 @@ macro_rules! packet_queries {
             }
         }
 
-        #[doc = concat!("Which of the ", $doc_k, " rays in the lanes set in `valid` are blocked over `(tnear, tfar]`: bit")]
+        #[doc = concat!("Which of the ", $doc_k, " rays in the lanes set in `valid` are blocked over `[tnear, tfar]`: bit")]
         /// `i` of the result is set for lane `i`. The packet is not modified; invalid rays are
         /// never blocked.
         ///
@@ -214,7 +214,7 @@ impl Scene {
         }
     }
 
-    /// Which of `rays` are blocked over `(tnear, tfar]`, into `occluded` (same length), on the
+    /// Which of `rays` are blocked over `[tnear, tfar]`, into `occluded` (same length), on the
     /// calling thread, as single rays with several in flight at once (see
     /// [`Scene::intersect_interleaved`]). The answers are [`Scene::occluded1`]'s.
     pub fn occluded_interleaved(&self, rays: &[Ray], occluded: &mut [bool]) {

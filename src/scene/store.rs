@@ -125,6 +125,11 @@ pub struct SurfaceHit {
 
 /// A committed, immutable scene that answers ray queries. Build one with
 /// [`crate::SceneBuilder`].
+///
+/// A ray covers `t` in `[tnear, tfar]`, both ends included: a surface at exactly `t = tnear`
+/// is hit, so a ray that starts on a surface with `tnear = 0` hits it at `t = 0` (as Embree's
+/// robust mode and trimesh's ray engines count it); a secondary ray that must not see the
+/// surface it leaves starts off it (the renderer offsets its origins) or sets `tnear > 0`.
 #[derive(Clone, Debug)]
 pub struct Scene {
     /// Triangle meshes.
@@ -259,7 +264,7 @@ impl Scene {
         self.bvh8.test
     }
 
-    /// Intersects one primitive over `(ray.tnear, tfar]` with the scene's triangle test:
+    /// Intersects one primitive over `[ray.tnear, tfar]` with the scene's triangle test:
     /// `(t, u, v)` or `None`.
     #[inline]
     pub fn intersect_prim(&self, prim: u32, ray: &Ray, tfar: f32) -> Option<(f32, f32, f32)> {
@@ -292,7 +297,7 @@ impl Scene {
         }
     }
 
-    /// True when anything lies in `(ray.tnear, ray.tfar]` (scalar reference traversal; every
+    /// True when anything lies in `[ray.tnear, ray.tfar]` (scalar reference traversal; every
     /// primitive without a binary BVH, as [`Scene::intersect1_reference`]).
     pub fn occluded1_reference(&self, ray: &Ray) -> bool {
         match &self.bvh2 {
@@ -377,7 +382,7 @@ impl Scene {
         hit
     }
 
-    /// True when anything blocks `ray` over `(tnear, tfar]` (the BVH8 any-hit kernel).
+    /// True when anything blocks `ray` over `[tnear, tfar]` (the BVH8 any-hit kernel).
     /// Invalid rays are never occluded.
     ///
     /// ```
