@@ -94,13 +94,15 @@ class Scene:
         *,
         threads: int | None = None,
     ) -> Hits:
-        """Closest hit of each ray ``origin + t * direction`` over ``t`` in ``(tnear, tfar]``.
+        """Closest hit of each ray ``origin + t * direction`` over ``t`` in ``[tnear, tfar]``.
+        Both ends count: a ray that starts on a surface (``tnear = 0``) hits it at ``t = 0``.
 
         ``origins`` and ``directions`` are ``(K, 3)`` real arrays (float32 and float64 are read
         in place whatever their strides; one ``(3,)`` point stands for all rays); ``tnear``
-        (default 0) and ``tfar`` (default ``inf``) are numbers or ``(K,)`` arrays. Directions
-        need not be unit length: ``t`` is measured in units of their length. Rays with a
-        NaN/Inf component, a zero direction or ``tnear > tfar`` miss. Traced over ``threads``
+        (default 0) and ``tfar`` (default ``inf``) are numbers or ``(K,)`` arrays, and a value
+        below zero is a ``ValueError`` naming the argument. Directions need not be unit length:
+        ``t`` is measured in units of their length. Rays with a NaN/Inf component, a zero
+        direction, a NaN ``tnear``/``tfar`` or ``tnear > tfar`` miss. Traced over ``threads``
         threads (default: all cores) with the GIL released, as 16-ray packets in the order
         given (keep coherent rays together).
         """
@@ -113,7 +115,7 @@ class Scene:
         *,
         threads: int | None = None,
     ) -> npt.NDArray[np.bool_]:
-        """Whether anything lies on each ray over ``(tnear, tfar]``: ``bool (K,)``. Arguments as
+        """Whether anything lies on each ray over ``[tnear, tfar]``: ``bool (K,)``. Arguments as
         for ``intersect``."""
     def intersect_all(
         self,
@@ -134,7 +136,8 @@ class Scene:
     ]:
         """Every hit along each ray, at most ``max_hits`` per ray: ``(ray, prim, t, u, v)``
         arrays, ordered by ray, then by ``t``. After a hit at ``t`` the ray goes on from
-        ``t + min_step / |direction|`` (``min_step`` is a distance)."""
+        ``t + min_step / |direction|`` (``min_step`` is a distance), at least from the next
+        float above ``t``; the first hit may be at ``t = tnear``."""
     @property
     def num_triangles(self) -> int:
         """Triangles the scene traces (after dropping the untraceable ones)."""

@@ -186,8 +186,33 @@ pub fn column_arg<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<ColumnAr
     Ok(ColumnArg::Array(arr))
 }
 
-/// The column of `arg`, checked to have `rays` values when it is an array.
+/// The column of `arg`, checked to have `rays` values when it is an array and no value below
+/// zero ([`not_negative`]).
 pub fn column<'a>(arg: &'a ColumnArg<'_>, name: &str, rays: usize) -> PyResult<Column<'a>> {
+    let column = column_unchecked(arg, name, rays)?;
+    not_negative(&column, name)?;
+    Ok(column)
+}
+
+/// A `ValueError` naming `name` (and the ray) for the first value below zero as the tracer
+/// sees it (rounded to `f32`, so `-0.0` and a `-1e-50` that rounds to it are zero): a ray
+/// covers `t` in `[tnear, tfar]` from its origin, as the `--rays` reader requires of files
+/// (`0 <= tnear <= tfar`); NaN stays a ray that misses.
+fn not_negative(column: &Column<'_>, name: &str) -> PyResult<()> {
+    let first = match column {
+        Column::Same(x) => (*x < 0.0).then(|| format!("{x}")),
+        Column::F32(a) => a.iter().position(|&x| x < 0.0).map(|i| format!("{} for ray {i}", a[i])),
+        Column::F64(a) => a.iter().position(|&x| (x as f32) < 0.0).map(|i| format!("{} for ray {i}", a[i])),
+    };
+    match first {
+        None => Ok(()),
+        Some(got) => Err(PyValueError::new_err(format!(
+            "{name}: expected values >= 0 (t is measured from each ray's origin over [tnear, tfar]), got {got}"
+        ))),
+    }
+}
+
+fn column_unchecked<'a>(arg: &'a ColumnArg<'_>, name: &str, rays: usize) -> PyResult<Column<'a>> {
     match arg {
         ColumnArg::Number(x) => Ok(Column::Same(*x)),
         ColumnArg::Array(arr) => {
@@ -208,7 +233,7 @@ pub fn column<'a>(arg: &'a ColumnArg<'_>, name: &str, rays: usize) -> PyResult<C
     }
 }
 
-/// The rays of one query: origins, directions and their `(tnear, tfar]` intervals.
+/// The rays of one query: origins, directions and their `[tnear, tfar]` intervals.
 #[derive(Clone, Copy)]
 pub struct Rays<'a> {
     pub origins: Points<'a>,

@@ -249,14 +249,16 @@ impl PyScene {
         Ok(scene)
     }
 
-    /// Closest hit of each ray ``origin + t * direction`` over ``t`` in ``(tnear, tfar]``, as a
-    /// ``Hits`` of arrays ``t, prim, u, v, normal``.
+    /// Closest hit of each ray ``origin + t * direction`` over ``t`` in ``[tnear, tfar]``, as a
+    /// ``Hits`` of arrays ``t, prim, u, v, normal``. Both ends count: a ray that starts on a
+    /// surface (``tnear = 0``) hits it at ``t = 0``.
     ///
     /// ``origins`` and ``directions`` are ``(K, 3)`` real arrays (float32 and float64 are read
     /// in place whatever their strides; one ``(3,)`` point stands for all rays); ``tnear``
-    /// (default 0) and ``tfar`` (default ``inf``) are numbers or ``(K,)`` arrays. Directions
-    /// need not be unit length: ``t`` is measured in units of their length. Rays with a
-    /// NaN/Inf component, a zero direction or ``tnear > tfar`` miss. Traced over ``threads``
+    /// (default 0) and ``tfar`` (default ``inf``) are numbers or ``(K,)`` arrays, and a value
+    /// below zero is a ``ValueError`` naming the argument. Directions need not be unit length:
+    /// ``t`` is measured in units of their length. Rays with a NaN/Inf component, a zero
+    /// direction, a NaN ``tnear``/``tfar`` or ``tnear > tfar`` miss. Traced over ``threads``
     /// threads (default: all cores) with the GIL released, as 16-ray packets in the order
     /// given (keep coherent rays together).
     #[pyo3(signature = (origins, directions, tnear = None, tfar = None, *, threads = None))]
@@ -302,7 +304,7 @@ impl PyScene {
         })
     }
 
-    /// Whether anything lies on each ray over ``(tnear, tfar]``: ``bool (K,)``. Arguments as
+    /// Whether anything lies on each ray over ``[tnear, tfar]``: ``bool (K,)``. Arguments as
     /// for ``intersect``.
     #[pyo3(signature = (origins, directions, tnear = None, tfar = None, *, threads = None))]
     fn occluded<'py>(
@@ -329,7 +331,8 @@ impl PyScene {
 
     /// Every hit along each ray, at most ``max_hits`` per ray: ``(ray, prim, t, u, v)`` arrays,
     /// ordered by ray, then by ``t``. After a hit at ``t`` the ray goes on from
-    /// ``t + min_step / |direction|`` (``min_step`` is a distance).
+    /// ``t + min_step / |direction|`` (``min_step`` is a distance), at least from the next
+    /// float above ``t``; the first hit may be at ``t = tnear``.
     #[pyo3(signature = (origins, directions, tnear = None, tfar = None, *, max_hits = 100, min_step = 0.0, threads = None))]
     #[allow(clippy::too_many_arguments, clippy::type_complexity)]
     fn intersect_all<'py>(

@@ -91,7 +91,7 @@ pub fn intersect(target: Target<'_>, rays: Rays<'_>, out: HitArrays<'_>) {
         );
 }
 
-/// Whether anything blocks each of `rays` over `(tnear, tfar]`, into `out`.
+/// Whether anything blocks each of `rays` over `[tnear, tfar]`, into `out`.
 pub fn occluded(target: Target<'_>, rays: Rays<'_>, out: &mut [bool]) {
     out.par_chunks_mut(CHUNK).enumerate().for_each_init(
         || vec![Ray::new(Vec3::ZERO, Vec3::X); CHUNK],
@@ -145,8 +145,8 @@ pub fn intersect_all(target: Target<'_>, rays: Rays<'_>, max_hits: usize, min_st
                     let (j, mut ray) = live[idx];
                     hits.push((j, hit));
                     let step = min_step / ray.dir.length();
-                    // At least the next float above t: the interval is (tnear, tfar].
-                    ray.tnear = (hit.t + step).max(hit.t);
+                    // At least the next float above t: the interval [tnear, tfar] holds tnear.
+                    ray.tnear = (hit.t + step).max(hit.t.next_up());
                     if ray.tnear.is_finite() && ray.tnear <= ray.tfar {
                         live[next] = (j, ray);
                         next += 1;

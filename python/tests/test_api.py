@@ -28,17 +28,40 @@ def test_one_triangle_closed_form():
     assert "1 of 2 rays hit" in repr(hits)
 
 
-def test_t_is_in_units_of_the_direction_and_the_interval_is_open_closed():
+def test_t_is_in_units_of_the_direction_and_the_interval_is_closed():
     scene = raypack.Scene(TRI_V, TRI_F)
     o = [0.25, 0.25, 2.0]
     assert scene.intersect(o, [[0, 0, -2.0]]).t.tolist() == [1.0]
-    # (tnear, tfar]: a hit at exactly tfar counts, at exactly tnear it does not.
+    # [tnear, tfar]: a hit at exactly tfar counts, and one at exactly tnear too.
     assert scene.intersect(o, [[0, 0, -1.0]], tfar=2.0).prim.tolist() == [0]
     assert scene.intersect(o, [[0, 0, -1.0]], tfar=1.999).prim.tolist() == [-1]
-    assert scene.intersect(o, [[0, 0, -1.0]], tnear=2.0).prim.tolist() == [-1]
+    assert scene.intersect(o, [[0, 0, -1.0]], tnear=2.0).prim.tolist() == [0]
+    assert scene.intersect(o, [[0, 0, -1.0]], tnear=np.nextafter(np.float32(2), np.float32(3))).prim.tolist() == [-1]
     assert scene.occluded(o, [[0, 0, -1.0], [0, 0, 1.0]]).tolist() == [True, False]
     assert scene.occluded(o, [[0, 0, -1.0]] * 2, tfar=np.array([2.5, 1.5])).tolist() == [True, False]
-    assert scene.occluded(o, [[0, 0, -1.0]] * 2, tnear=np.array([1.0, 2.0], np.float32)).tolist() == [True, False]
+    assert scene.occluded(o, [[0, 0, -1.0]] * 2, tnear=np.array([2.0, 2.5], np.float32)).tolist() == [True, False]
+
+
+def test_a_ray_starting_on_a_surface_hits_it_at_t_zero():
+    # From a point of the triangle, either way (tnear = 0 counts): t = +0.0, the point's
+    # barycentrics; occluded too. With tnear above 0 the ray leaves it behind.
+    scene = raypack.Scene(TRI_V, TRI_F)
+    o, d = [0.25, 0.5, 0.0], np.array([[0, 0, -1.0], [0, 0, 1.0], [0.3, -0.2, 1.0]])
+    hits = scene.intersect(o, d)
+    assert hits.prim.tolist() == [0, 0, 0] and hits.t.tolist() == [0.0] * 3
+    assert not np.signbit(hits.t).any()
+    assert (hits.u.tolist(), hits.v.tolist()) == ([0.25] * 3, [0.5] * 3)
+    assert scene.occluded(o, d).tolist() == [True] * 3
+    assert scene.intersect(o, d, tnear=1e-6).prim.tolist() == [-1] * 3
+    assert scene.occluded(o, d, tnear=1e-6).tolist() == [False] * 3
+    # -0.0 (and what rounds to it in float32) is zero, not negative: [0, 0] holds the hit.
+    assert scene.intersect(o, d, tnear=-0.0, tfar=np.array([-0.0, 0.0, -1e-50])).t.tolist() == [0.0] * 3
+    # Every hit along a ray from a surface: that surface first, then the others, each once
+    # (a layer of two parallel triangles 1 apart), with min_step 0 too.
+    two = raypack.Scene(np.vstack([TRI_V, TRI_V - [0, 0, 1]]), np.array([[0, 1, 2], [3, 4, 5]]))
+    for step in (0.0, 1e-3):
+        ray, prim, t, _, _ = two.intersect_all(o, [[0, 0, -1.0]], min_step=step)
+        assert (ray.tolist(), prim.tolist(), t.tolist()) == ([0, 0], [0, 1], [0.0, 1.0])
 
 
 def test_invalid_rays_miss():

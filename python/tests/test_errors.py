@@ -68,6 +68,11 @@ def test_bad_build_options(kwargs, error, message):
         ((O, D), {"tfar": np.ones((4, 1))}, ValueError, r"tfar: expected a number or shape \(4,\) \(one per ray\), got \(4, 1\)"),
         ((O, D), {"tfar": True}, TypeError, r"tfar: expected a number or an array of numbers, got a bool"),
         ((O, D), {"tfar": "far"}, TypeError, r"tfar: .*got dtype <U3"),
+        ((O, D), {"tnear": -1e-6}, ValueError, r"tnear: expected values >= 0 \(t is measured from each ray's origin.*got -0\.000001$"),
+        ((O, D), {"tnear": np.array([0, 1, -0.5, 2])}, ValueError, r"tnear: expected values >= 0 .*got -0\.5 for ray 2$"),
+        ((O, D), {"tnear": np.float32(-np.inf)}, ValueError, r"tnear: expected values >= 0 .*got -inf$"),
+        ((O, D), {"tfar": -1}, ValueError, r"tfar: expected values >= 0 .*got -1$"),
+        ((O, D), {"tfar": np.array([1, 2, 3, -4], np.float32)}, ValueError, r"tfar: expected values >= 0 .*got -4 for ray 3$"),
         ((O, D), {"threads": 0}, ValueError, r"threads: expected None \(all cores\) or at least 1, got 0"),
     ],
 )
@@ -127,7 +132,8 @@ v = rng.choice(vals, size=(300, 3)); v[::3] = rng.random((100, 3))
 f = rng.integers(0, 300, size=(500, 3))
 s = raypack.Scene(v, f)
 o = rng.choice(vals, size=(5000, 3)); d = rng.choice(vals, size=(5000, 3))
-h = s.intersect(o, d, tnear=rng.choice(vals, 5000), tfar=rng.choice(vals, 5000))
+# Negative tnear / tfar are a ValueError (test_bad_rays); NaN and Inf go through.
+h = s.intersect(o, d, tnear=np.abs(rng.choice(vals, 5000)), tfar=np.abs(rng.choice(vals, 5000)))
 s.occluded(o, d); s.intersect_all(o, d, max_hits=3)
 print("alive", s.report["dropped_non_finite"] > 0)
 """
