@@ -11,12 +11,26 @@
 ``RayMeshIntersector`` has the methods, signatures and return conventions of trimesh's own
 intersectors (``trimesh.ray.ray_pyembree`` and ``trimesh.ray.ray_triangle``):
 ``intersects_first``, ``intersects_any``, ``intersects_id`` (with ``multiple_hits`` and
-``return_locations``), ``intersects_location`` and ``contains_points``. Differences:
+``return_locations``), ``intersects_location`` and ``contains_points``. As in trimesh's
+engines, a ray that starts on a face hits it (at distance 0), and with ``multiple_hits=True``
+goes on past it to the faces beyond. Differences from trimesh's embree intersector:
 
 * ``multiple_hits=True`` results are ordered by ray, then by distance along it (trimesh's
   embree intersector orders them by hit depth first); the same hits otherwise. After a hit a
   ray goes on from ``max(1e-8, mesh.scale * 1e-6)`` past it, as trimesh's embree intersector
   does, so a ray crossing a shared edge counts one hit.
+* ``intersects_first`` returns int64 face indices (trimesh's embree intersector int32, its
+  pure-numpy one int64).
+* Where a ray meets an edge or a vertex, or starts within float32 rounding of a face, either
+  of two equally valid answers may come out, and not always trimesh's: raypack traces in
+  float32 in the mesh's own frame (moved to the origin only when it lies far from it), trimesh's
+  embree intersector in float32 after moving the mesh's lowest corner to the origin and scaling
+  it to about 100 units, so the two round differently (``watertight=True`` makes raypack's
+  own answer at an edge a hit on one of its faces, never a miss between them).
+* A hit on a face the ray runs almost along (``|cos|`` of the angle between the direction and
+  the face's normal at most 1e-5) is kept, located where the ray meets the face's plane (at
+  ``origin + t * direction`` when it runs along it); trimesh's embree intersector drops it
+  when locations or multiple hits are asked for, and that ray stops there.
 * Directions need not be unit length (trimesh normalises them; the hits are the same).
 * The scene is rebuilt when the mesh changes (trimesh's cache), with ``quality=``,
   ``watertight=`` and ``threads=`` as given to the constructor.
@@ -260,4 +274,4 @@ class RayMeshIntersector:
         return self.__copy__()
 
     def __copy__(self, *args):
-        return RayMeshIntersector(self.mesh, self._scale_to_box, **self._options)
+        return type(self)(self.mesh, self._scale_to_box, **self._options)

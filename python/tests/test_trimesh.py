@@ -188,3 +188,72 @@ def test_degenerate_faces_keep_their_ids():
     ours = raypack.trimesh.RayMeshIntersector(odd).intersects_first(o, d)
     plain = raypack.trimesh.RayMeshIntersector(mesh).intersects_first(o, d)
     assert np.array_equal(ours, np.where(plain >= 0, plain + 1, -1))
+
+
+def box_face_rays(mesh):
+    """Rays from points of each face of the axis-aligned box ``mesh`` (none on a diagonal or
+    an edge, all exact in float32): along the face's outward normal, against it, and
+    obliquely inward. Returns origins, directions and each origin's face normal."""
+    lo, hi = mesh.bounds
+    centre, half = (lo + hi) / 2, (hi - lo) / 2
+    origins, directions, normals = [], [], []
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            n = np.zeros(3)
+            n[axis] = sign
+            a, b = (axis + 1) % 3, (axis + 2) % 3
+            for u, v in [(0.2, 0.6), (-0.4, 0.7), (0.54, -0.22)]:
+                p = centre + n * half
+                p[a] += u * half[a]
+                p[b] += v * half[b]
+                oblique = -n.copy()
+                oblique[a] = 0.25
+                for d in (n, -n, oblique):
+                    origins.append(p)
+                    directions.append(d)
+                    normals.append(n)
+    return np.array(origins), np.array(directions), np.array(normals)
+
+
+def test_rays_from_a_face_count_it_as_trimeshs_intersectors_do():
+    """A ray that starts on a face hits it at distance 0 and, with multiple hits, goes on past
+    it to the faces beyond, as trimesh's embree and pure-numpy intersectors do (issue 70: the
+    unit box from (0.1, 0.3, 0.5) on its top face, down and up, and rays from points of every
+    face, out, in and oblique)."""
+    mesh = trimesh.creation.box()
+    ours = raypack.trimesh.RayMeshIntersector(mesh)
+    o, d, n = box_face_rays(mesh)
+    o = np.vstack([[[0.1, 0.3, 0.5]] * 2, o])
+    d = np.vstack([[[0, 0, -1.0], [0, 0, 1.0]], d])
+    n = np.vstack([[[0, 0, 1.0]] * 2, n])
+    first = ours.intersects_first(o, d)
+    # The first hit is the face the ray starts on (closed form: its normal), and any-hit agrees.
+    assert np.allclose(mesh.face_normals[first], n)
+    assert ours.intersects_any(o, d).all()
+    tri, ray, loc = ours.intersects_id(o, d, multiple_hits=True, return_locations=True)
+    assert np.array_equal(loc[np.searchsorted(ray, np.arange(len(o)))], o)
+    for ref_name, Ref in references().items():
+        ref = Ref(mesh)
+        assert np.array_equal(first, ref.intersects_first(o, d)), ref_name
+        assert np.array_equal(ours.intersects_any(o, d), ref.intersects_any(o, d)), ref_name
+        rtri, rray, rloc = ref.intersects_id(o, d, multiple_hits=True, return_locations=True)
+        assert sorted(zip(ray.tolist(), tri.tolist())) == sorted(zip(rray.tolist(), rtri.tolist())), ref_name
+        order, rorder = np.lexsort((tri, ray)), np.lexsort((rtri, rray))
+        assert np.allclose(loc[order], rloc[rorder], atol=1e-12), ref_name
+
+
+@pytest.mark.parametrize("scale", [1e-4, 0.1, 1.0, 10.0, 1e4, 1e8])
+def test_multiple_hits_from_a_surface_vertex_at_every_scale(scale):
+    """trimesh's own ``test_embree_duplicate_hits``: a ray from the vertex at the centre of a
+    subdivided box's top face, straight down, hits the box twice (where it starts and where it
+    leaves), at every scale; so does trimesh's embree intersector."""
+    mesh = trimesh.creation.box().subdivide().subdivide()
+    mesh.apply_scale(scale)
+    o, d = np.array([[0.0, 0.0, scale / 2]]), np.array([[0.0, 0.0, -1.0]])
+    tri, _, loc = raypack.trimesh.RayMeshIntersector(mesh, scale_to_box=False).intersects_id(
+        o, d, multiple_hits=True, return_locations=True
+    )
+    assert np.allclose(loc, [[0, 0, scale / 2], [0, 0, -scale / 2]], rtol=0, atol=1e-9 * scale)
+    if trimesh.ray.has_embree:
+        ref = trimesh.ray.ray_pyembree.RayMeshIntersector(mesh, scale_to_box=False)
+        assert len(ref.intersects_id(o, d, multiple_hits=True)[0]) == len(tri)
