@@ -129,7 +129,7 @@ pub enum RaySpec {
     /// Taken as is.
     Free(Ray),
     /// From `origin` towards the point with barycentric weights `(1 - u - v, u, v)` of
-    /// triangle `tri` (modulo the triangle count), over `(tnear, tfar]`: rays that hit
+    /// triangle `tri` (modulo the triangle count), over `[tnear, tfar]`: rays that hit
     /// vertices, edges and interiors exactly.
     Aimed {
         /// Ray origin.
@@ -318,7 +318,7 @@ pub fn slack() -> f32 {
 /// The traversal oracle for one ray: the public kernels (`intersect1`, `occluded1`) and the
 /// reference BVH2 traversal answer what testing every primitive answers (within a [`slack`]
 /// tolerance); `intersect1` and the reference report the same `t` bits when they report the
-/// same primitive (kernel twins agree); a hit lies in `(tnear, tfar]` with finite `t`, `u`,
+/// same primitive (kernel twins agree); a hit lies in `[tnear, tfar]` with finite `t`, `u`,
 /// `v`; invalid rays miss.
 pub fn check_ray(scene: &Scene, ray: &Ray) {
     let got = scene.intersect1(ray);
@@ -336,8 +336,8 @@ pub fn check_ray(scene: &Scene, ray: &Ray) {
     for hit in [&got, &reference] {
         if hit.is_hit() {
             assert!(
-                hit.t > ray.tnear && hit.t <= ray.tfar,
-                "t {} outside ({}, {}]: {ray:?}",
+                hit.t >= ray.tnear && hit.t <= ray.tfar,
+                "t {} outside [{}, {}]: {ray:?}",
                 hit.t,
                 ray.tnear,
                 ray.tfar
@@ -365,7 +365,7 @@ pub fn check_ray(scene: &Scene, ray: &Ray) {
         // A ray stopping just past the closest hit is blocked; one stopping just short of it
         // is blocked exactly when brute force finds something there.
         let past = Ray { tfar: got.t + 2.0 * tol.at(got.t), ..*ray };
-        assert!(scene.occluded1(&past), "hit at t = {} but not occluded over (tnear, t]: {ray:?}", got.t);
+        assert!(scene.occluded1(&past), "hit at t = {} but not occluded over [tnear, t]: {ray:?}", got.t);
         let short = Ray { tfar: got.t - 2.0 * tol.at(got.t), ..*ray };
         if short.is_valid() {
             let b = scene.intersect1_brute_force(&short);
