@@ -1,6 +1,12 @@
 //! Reading input files that someone else may have planted: only regular files are opened,
 //! the open itself never blocks, and every kind of file has a size limit.
 //!
+//! This is the one way raypack reads a file a user names: scenes, camera files, MTL
+//! libraries, BVH cache files, `bench --rays` ray files, `raypack report`'s bench JSON and the
+//! report's font all go through [`open_regular`] (and [`read_regular`], which reads what it
+//! opens). The only other files read are the kernel's own (`/proc`, `/sys`).
+//! `tests/one_reader_one_writer.rs` fails when a new read elsewhere bypasses it.
+//!
 //! A path that is (or links to) a FIFO would block `open(2)` until a writer appears, and one
 //! that is `/dev/zero` would be read until memory runs out. [`open_regular`] checks the type
 //! before opening (so a device is not even opened), opens with `O_NONBLOCK | O_NOCTTY` (so a
@@ -18,6 +24,13 @@ pub const MAX_SCENE_BYTES: u64 = 4 << 30;
 pub const MAX_CAMERA_FILE_BYTES: u64 = 64 << 10;
 /// Material libraries larger than this are refused (real ones are kilobytes).
 pub const MAX_MTL_BYTES: u64 = 64 << 20;
+/// Ray files (`bench --rays`) larger than this are refused: 134 million rays of 32 bytes.
+pub const MAX_RAY_FILE_BYTES: u64 = 4 << 30;
+/// Bench JSON files (`raypack report`) larger than this are refused (a bench of every method
+/// at many thread counts writes tens of kilobytes).
+pub const MAX_BENCH_JSON_BYTES: u64 = 64 << 20;
+/// Font files larger than this are refused (DejaVu Sans is 757 kB).
+pub const MAX_FONT_BYTES: u64 = 64 << 20;
 
 /// What a file that is not a regular file is, for messages: "a FIFO (named pipe)", "a
 /// character device", ….

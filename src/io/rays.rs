@@ -71,10 +71,14 @@ impl RayFileFormat {
     }
 }
 
-/// Reads the rays of `path` (layout by extension).
+/// Reads the rays of `path` (layout by extension), if it is a regular file of at most
+/// [`crate::io::input::MAX_RAY_FILE_BYTES`] (a FIFO or `/dev/zero` is an error, not a hang
+/// or an endless read).
 pub fn read_rays(path: &Path) -> Result<Vec<Ray>, RayFileError> {
+    use crate::io::input::{MAX_RAY_FILE_BYTES, read_regular};
     let format = RayFileFormat::of(path).ok_or_else(|| RayFileError::UnknownFormat { path: path.into() })?;
-    let bytes = std::fs::read(path).map_err(|source| RayFileError::Io { path: path.into(), source })?;
+    let bytes = read_regular(path, MAX_RAY_FILE_BYTES, "ray files")
+        .map_err(|source| RayFileError::Io { path: path.into(), source })?;
     parse_rays(&bytes, format, path)
 }
 
