@@ -7,6 +7,8 @@ use raypack::rng::Rng;
 use raypack::{BuildOptions, Isa, Material, Ray, Scene, SceneBuilder, Vec3};
 use std::path::PathBuf;
 
+pub mod child;
+
 /// Commits `meshes` (and `spheres`: centre, radius) into a scene with one diffuse material.
 /// Keeps the binary BVH whatever `opts` say: tests compare the kernels with its reference
 /// traversal.

@@ -939,6 +939,11 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     if let Some(p) = a.json.as_deref().filter(|p| *p != Path::new("-")) {
         check_target(p, &json_opts)?;
     }
+    // The report directory is checked before the run, not after it.
+    let report_inputs: Vec<std::path::PathBuf> = inputs.iter().map(|p| p.to_path_buf()).collect();
+    if let Some(dir) = &a.report {
+        crate::report::check_report_dir(dir, &[dir.join("bench.json")], &report_inputs)?;
+    }
     let per_ray = raypack::memory::BENCH_BYTES_PER_PIXEL;
     check_memory(width, height, (width * height) as u64 * per_ray, per_ray)?;
     let (builder, warnings) = load(scene_path, a.max_primitives)?;
@@ -971,7 +976,6 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     }
     if let Some(dir) = &a.report {
         let json = dir.join("bench.json");
-        std::fs::create_dir_all(dir).map_err(|e| CliError::Usage(format!("{}: {e}", dir.display())))?;
         write_file_with(&json, format!("{:#}\n", out.json()).as_bytes(), &json_opts)?;
         crate::report::write_report(&[json], dir)?;
         eprintln!("[raypack] report: {}", dir.join("index.html").display());
