@@ -10,6 +10,7 @@ pub mod query;
 pub mod snapshot;
 pub mod store;
 pub mod surface;
+pub mod verify;
 
 pub use builder::{CommitReport, SceneBuilder, SceneError, bvh_builds};
 pub use cache::{CacheError, CacheReport};
@@ -17,3 +18,4 @@ pub use camera::Camera;
 pub use light::Light;
 pub use material::{Bsdf, Material, MaterialId};
 pub use store::{Scene, SpheresSoa, SurfaceHit, TrianglesSoa};
+pub use verify::AccelError;

@@ -373,15 +373,15 @@ impl Scene {
             _ => return Err(malformed("more than one camera".into())),
         };
         check_indices(&triangles, &spheres, materials.len()).map_err(malformed)?;
-        let num_prims = triangles.len() + spheres.len();
         let (kept, report) = SceneBuilder::from_parts(triangles, spheres, materials, lights, camera).filter();
         if report.dropped() > 0 {
             return Err(malformed(format!("holds primitives a commit drops: {report}")));
         }
         let mut accel = read_accel(&file)?;
-        check_accel(&accel, num_prims).map_err(malformed)?;
         // The key covers the options, so the blocks are laid out for this triangle test.
         accel.bvh8.test = TriangleTest::from_watertight(opts.watertight);
+        // The trees verified against the geometry they index (`scene::verify`).
+        check_accel(&accel, (&kept.triangles, &kept.spheres)).map_err(malformed)?;
         Ok((kept.with_accel(accel.bounds, accel.bvh2, accel.bvh8), opts))
     }
 }

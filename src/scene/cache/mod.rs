@@ -8,9 +8,21 @@
 //! when its magic, version and key match, its length is the one its header records and the
 //! XXH3-64 checksum of all its other bytes agrees; the BVH8's arrays are then used in place
 //! in the mapping ([`crate::bvh::BvhArray`]; the binary BVH, when kept, is copied out) and
-//! checked for the ranges the traversal kernels index with (child and block indices, depth,
-//! primitive ids, empty slots), so that even a forged file cannot make a query panic.
-//! Anything else is reported in [`CacheReport::rejected`], rebuilt and overwritten.
+//! verified against the scene's own geometry before use (`check_accel`, which every load goes
+//! through: [`crate::scene::verify::verify_accel`]): the ranges the traversal kernels index
+//! with, every child box inside its parent's, every primitive inside the leaves that
+//! reference it, every leaf block holding exactly the scene's primitives, and the bounds. A
+//! checksum proves nothing against a forger (anyone can recompute it); the verification
+//! proves that the trees trace exactly as a build would, whoever wrote them. Anything else is
+//! reported in [`CacheReport::rejected`], rebuilt and overwritten.
+//!
+//! The trust rule, for shared cache directories: *a loaded tree is always verified, and in a
+//! directory that other users can write, only files owned by this user or root are used.* A
+//! co-tenant's file could be verified correct and still be built to be slow (every box the
+//! scene's bounds: each ray visits every node), and no check short of a build tells a good
+//! tree from a slow one; such a file is reported ([`CacheError::Untrusted`]) and the scene is
+//! built (in a sticky directory, the other user's file cannot be replaced, so the new tree is
+//! not written either). Users who share one cache should let one account (or root) write it.
 //!
 //! Shared cache directories: a file is opened only if it is a regular file of at most
 //! [`max_file_bytes`] for the scene (a FIFO or `/dev/zero` planted at its name is rejected,
@@ -43,7 +55,7 @@ use crate::bvh::{BuildOptions, Bvh2, Bvh2Node, Bvh8, Bvh8Node, DefaultTriBlock};
 use crate::geometry::TriangleTest;
 use crate::geometry::{Sphere4, Tri8};
 use crate::math::Aabb;
-use crate::scene::{CommitReport, Scene, SceneBuilder};
+use crate::scene::{CommitReport, Scene, SceneBuilder, SpheresSoa, TrianglesSoa};
 use file::{CacheFile, SectionWriter};
 use memmap2::Mmap;
 use std::path::{Path, PathBuf};
@@ -153,6 +165,19 @@ pub enum CacheError {
         /// The file.
         path: PathBuf,
     },
+    /// In a directory other users can write, a file owned by someone else (neither this user
+    /// nor root): never used (see the module docs).
+    #[error(
+        "{}: owned by uid {uid} in a directory other users can write; raypack uses only its own (or root's) cache \
+         files there",
+        path.display()
+    )]
+    Untrusted {
+        /// The file.
+        path: PathBuf,
+        /// Its owner.
+        uid: u32,
+    },
     /// Well-formed header, but the sections or the trees in them are not what a build makes.
     #[error("{}: malformed: {what}", path.display())]
     Malformed {
@@ -236,7 +261,6 @@ impl SceneBuilder {
         let (kept, report) = self.filter();
         let key = CacheKey::of(&kept.triangles, &kept.spheres, opts);
         let path = key.path_in(dir);
-        let num_prims = kept.triangles.len() + kept.spheres.len();
         let mut cache = CacheReport {
             path: path.clone(),
             loaded: false,
@@ -246,10 +270,11 @@ impl SceneBuilder {
             write_error: None,
         };
         cache.dir_writable_by = writable_by_others(dir);
-        match load(&path, key, num_prims) {
-            Ok(Some((mut accel, copied))) => {
-                // The key covers `opts`, so the file's blocks are laid out for its triangle test.
-                accel.bvh8.test = TriangleTest::from_watertight(opts.watertight);
+        // The key covers `opts`, so the file's blocks are laid out for their triangle test.
+        let test = TriangleTest::from_watertight(opts.watertight);
+        let shared = cache.dir_writable_by.is_some();
+        match load(&path, key, (&kept.triangles, &kept.spheres), test, shared) {
+            Ok(Some((accel, copied))) => {
                 cache.loaded = true;
                 cache.copied = copied;
                 return (kept.with_accel(accel.bounds, accel.bvh2, accel.bvh8), report, cache);
@@ -279,10 +304,18 @@ pub fn max_file_bytes(num_prims: usize) -> u64 {
     (num_prims as u64).saturating_mul(1024).saturating_add(1 << 20)
 }
 
-/// Reads the cache file at `path`: `Ok(None)` when there is none; with the structures, whether
-/// the file was copied rather than mapped (see the module docs).
-fn load(path: &Path, key: CacheKey, num_prims: usize) -> Result<Option<(Accel, bool)>, CacheError> {
+/// Reads the cache file at `path` for the committed `geometry`, whose trees are laid out for
+/// `test`; `shared`: other users can write the directory. `Ok(None)` when there is none; with
+/// the structures, whether the file was copied rather than mapped (see the module docs).
+fn load(
+    path: &Path,
+    key: CacheKey,
+    geometry: (&TrianglesSoa, &SpheresSoa),
+    test: TriangleTest,
+    shared: bool,
+) -> Result<Option<(Accel, bool)>, CacheError> {
     use crate::io::input::open_regular;
+    let num_prims = geometry.0.len() + geometry.1.len();
     let (file, len) = match open_regular(path, max_file_bytes(num_prims), "BVH cache files of this scene") {
         Ok(f) => f,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
@@ -293,7 +326,11 @@ fn load(path: &Path, key: CacheKey, num_prims: usize) -> Result<Option<(Accel, b
         std::io::Read::read_to_end(&mut std::io::Read::take(&file, len), &mut bytes).map_err(io(path))?;
         return CacheFile::check(path, &bytes, key).map(|_| None);
     }
-    let private = changed_only_by_us(&file.metadata().map_err(io(path))?);
+    let meta = file.metadata().map_err(io(path))?;
+    if shared && let Some(uid) = foreign_owner(&meta) {
+        return Err(CacheError::Untrusted { path: path.to_path_buf(), uid });
+    }
+    let private = changed_only_by_us(&meta);
     let map = if private {
         // SAFETY: the mapping is read-only, and the BVH8's arrays read it in place for as long
         // as the scene lives. Only this user or root can change the file (checked just above on
@@ -310,8 +347,9 @@ fn load(path: &Path, key: CacheKey, num_prims: usize) -> Result<Option<(Accel, b
     };
     let map = Arc::new(map);
     let file = CacheFile::check_mapped(path, &map, key)?;
-    let accel = read_accel(&file)?;
-    check_accel(&accel, num_prims).map_err(|what| CacheError::Malformed { path: path.to_path_buf(), what })?;
+    let mut accel = read_accel(&file)?;
+    accel.bvh8.test = test;
+    check_accel(&accel, geometry).map_err(|what| CacheError::Malformed { path: path.to_path_buf(), what })?;
     Ok(Some((accel, !private)))
 }
 
@@ -320,6 +358,20 @@ fn load(path: &Path, key: CacheKey, num_prims: usize) -> Result<Option<(Accel, b
 fn trusted_owner(uid: u32) -> bool {
     // SAFETY: geteuid has no preconditions and cannot fail.
     uid == 0 || uid == unsafe { libc::geteuid() }
+}
+
+/// The owner of the file, when it is neither this user nor root.
+fn foreign_owner(meta: &std::fs::Metadata) -> Option<u32> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        (!trusted_owner(meta.uid())).then_some(meta.uid())
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = meta;
+        None
+    }
 }
 
 /// True when nobody but this user (or root) can write the file: it is owned by one of them
@@ -394,15 +446,14 @@ pub(crate) fn read_accel(f: &CacheFile) -> Result<Accel, CacheError> {
     })
 }
 
-/// The ranges the traversal kernels index with ([`crate::bvh::validate`]'s index checks):
-/// every child, block and primitive reference in range, each node reached once, depth at most
-/// [`crate::bvh::MAX_DEPTH`], empty slots never hit.
-pub(crate) fn check_accel(a: &Accel, num_prims: usize) -> Result<(), String> {
-    use crate::bvh::validate::{check_bvh2_indices, check_bvh8_indices};
-    if let Some(b) = &a.bvh2 {
-        check_bvh2_indices(b, num_prims).map_err(|e| format!("binary BVH: {e}"))?;
-    }
-    check_bvh8_indices(&a.bvh8, num_prims).map_err(|e| format!("8-wide BVH: {e}"))
+/// The check every cache image passes before it is used: [`crate::scene::verify::verify_accel`]
+/// against the scene's committed geometry, so that the trees trace exactly as a build would
+/// (the ranges the kernels index with, every box holding its children and its primitives,
+/// every block holding the scene's own primitives, the bounds). The caller sets
+/// `a.bvh8.test` first: the blocks are compared in its layout.
+pub(crate) fn check_accel(a: &Accel, geometry: (&TrianglesSoa, &SpheresSoa)) -> Result<(), String> {
+    crate::scene::verify::verify_accel(geometry.0, geometry.1, &a.bounds, a.bvh2.as_ref(), &a.bvh8)
+        .map_err(|e| e.to_string())
 }
 
 fn io(p: &Path) -> impl Fn(std::io::Error) -> CacheError + '_ {
