@@ -126,11 +126,11 @@ impl ImageFormat {
         if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) { Self::Exr } else { Self::Png }
     }
 
-    /// The format `path`'s extension names (PNG for a path without one), or `None` for an
-    /// extension raypack cannot write (`.jpg`): [`ImageFormat::of`] would write PNG bytes there.
+    /// The format `path`'s extension names, or `None` for a path without one or an extension
+    /// raypack cannot write (`.jpg`): [`ImageFormat::of`] would write PNG bytes there.
     pub fn for_path(path: &Path) -> Option<Self> {
         match path.extension() {
-            None => Some(Self::Png),
+            None => None,
             Some(e) if e.eq_ignore_ascii_case("png") => Some(Self::Png),
             Some(e) if e.eq_ignore_ascii_case("exr") => Some(Self::Exr),
             Some(_) => None,

@@ -87,12 +87,37 @@ impl Isa {
     }
 
     /// The tier asked for by the environment variable `RAYPACK_ISA`, if it is set (an
-    /// unknown name is an error; a tier above the CPU's is returned as asked, for the caller
-    /// to report).
+    /// unknown name, or a value that is not UTF-8 text, is an error; a tier above the CPU's
+    /// is returned as asked, for the caller to report).
     pub fn from_env() -> Result<Option<Isa>, IsaError> {
-        match std::env::var("RAYPACK_ISA") {
-            Ok(s) if !s.trim().is_empty() => Isa::parse(&s).map(Some),
-            _ => Ok(None),
+        Isa::from_env_value(std::env::var_os("RAYPACK_ISA").as_deref())
+    }
+
+    /// [`Isa::from_env`] of the value `value` (`None`: unset).
+    fn from_env_value(value: Option<&std::ffi::OsStr>) -> Result<Option<Isa>, IsaError> {
+        match value.map(|v| v.to_str().ok_or(v)) {
+            None => Ok(None),
+            Some(Ok(s)) if s.trim().is_empty() => Ok(None),
+            Some(Ok(s)) => Isa::parse(s).map(Some),
+            // Shown with its bytes escaped: `"\xFF"`.
+            Some(Err(bytes)) => Err(IsaError::Unknown(format!("{bytes:?}"))),
+        }
+    }
+
+    /// `RAYPACK_ISA` checked, in the words every front end uses (the CLI prints them; the
+    /// Python module raises the error as a `ValueError` and the warning as a `UserWarning`):
+    /// `Err` for an unknown name or a value that is not UTF-8, `Ok(Some(warning))` for a
+    /// tier this CPU lacks (its best is used instead), `Ok(None)` when it is unset or fine.
+    pub fn env_report() -> Result<Option<String>, String> {
+        Isa::env_report_for(std::env::var_os("RAYPACK_ISA").as_deref(), Isa::detected())
+    }
+
+    /// [`Isa::env_report`] of the value `value` on a CPU whose best tier is `best`.
+    fn env_report_for(value: Option<&std::ffi::OsStr>, best: Isa) -> Result<Option<String>, String> {
+        match Isa::from_env_value(value) {
+            Err(e) => Err(format!("RAYPACK_ISA: {e}")),
+            Ok(Some(isa)) if isa > best => Ok(Some(format!("RAYPACK_ISA={isa}: this CPU's best is {best}; using it"))),
+            Ok(_) => Ok(None),
         }
     }
 
@@ -323,5 +348,30 @@ mod tests {
         assert!(Isa::Baseline.is_supported());
         assert!(Isa::available().all(Isa::is_supported));
         assert_eq!(Isa::detected().check(), Ok(Isa::detected()));
+    }
+
+    #[test]
+    fn the_environment_is_reported_in_the_same_words_everywhere() {
+        use std::ffi::OsStr;
+        let report = |v: Option<&OsStr>, best| Isa::env_report_for(v, best);
+        assert_eq!(report(None, Isa::Avx2), Ok(None));
+        assert_eq!(report(Some(OsStr::new(" ")), Isa::Avx2), Ok(None));
+        assert_eq!(report(Some(OsStr::new("sse")), Isa::Avx2), Ok(None));
+        assert_eq!(
+            report(Some(OsStr::new("avx512")), Isa::Avx2),
+            Ok(Some("RAYPACK_ISA=avx512: this CPU's best is avx2; using it".into()))
+        );
+        assert_eq!(
+            report(Some(OsStr::new("fast")), Isa::Avx512),
+            Err("RAYPACK_ISA: unknown ISA `fast`: expected sse, avx2 or avx512".into())
+        );
+        #[cfg(unix)]
+        {
+            use std::os::unix::ffi::OsStrExt;
+            assert_eq!(
+                report(Some(OsStr::from_bytes(b"avx\xff")), Isa::Avx512),
+                Err("RAYPACK_ISA: unknown ISA `\"avx\\xFF\"`: expected sse, avx2 or avx512".into())
+            );
+        }
     }
 }

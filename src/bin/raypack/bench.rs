@@ -918,6 +918,10 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     if a.build_runs == 0 {
         return Err(CliError::Usage("--build-runs 0: need at least one build".into()));
     }
+    // `-t 0` means all cores here; any other count is checked as elsewhere.
+    for &t in a.threads.iter().filter(|&&t| t > 0) {
+        crate::machine::check_threads(Some(t))?;
+    }
     let mut settings = BenchSettings {
         width,
         height,

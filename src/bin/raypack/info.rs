@@ -445,9 +445,7 @@ impl SceneInfo {
 
 /// `raypack info`: the figures of [`scene_info`] as text or JSON.
 pub(crate) fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
-    if a.threads == Some(0) {
-        return Err(CliError::Usage("-t 0: need at least one thread".into()));
-    }
+    crate::machine::check_threads(a.threads)?;
     let mut opts = InfoOptions {
         load: raypack::io::LoadOptions { max_primitives: a.max_primitives },
         cache_dir: a.bvh_cache.clone(),
