@@ -140,9 +140,13 @@ fn camera_flags_equal_a_camera_file_of_the_same_camera() {
     let image = pixels(&flags);
     assert!(image.iter().any(|&p| p > 0), "the box is in view");
     assert_eq!(image, pixels(&file), "--lookat/--up/--fov and the camera file render the same image");
-    // --write-camera writes that camera, commented, and renders nothing; -c reads it back.
+    // --write-camera writes that camera, commented, and renders nothing (so an image name
+    // beside it is refused); -c reads it back.
     let cam2 = dir.join("written.txt");
     let (code, err, _) = raypack(&[&common[..], &view, &["--write-camera", s(&cam2), "-o", s(&written)]].concat());
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("with --write-camera") && !cam2.exists() && !written.exists(), "{err}");
+    let (code, err, _) = raypack(&[&common[..], &view, &["--write-camera", s(&cam2)]].concat());
     assert_eq!(code, 0, "{err}");
     assert!(!written.exists(), "nothing rendered");
     let text = std::fs::read_to_string(&cam2).unwrap();

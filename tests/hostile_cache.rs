@@ -230,3 +230,50 @@ fn a_cache_file_another_user_owns_in_a_shared_directory_is_not_used() {
     let (_, _, r) = builder().commit_cached(&opts(), dir.path());
     assert!(r.loaded && r.rejected.is_none(), "{r:?}");
 }
+
+/// The temporary files of writers killed mid-write (SIGKILL leaves them) are removed by the
+/// next store of the same file: only this user's, only of this file, never one a live writer
+/// holds.
+#[test]
+fn stale_cache_temporaries_of_the_same_file_are_removed() {
+    use std::os::fd::AsRawFd;
+    let dir = tempfile::tempdir().unwrap();
+    let path = cache_path(&builder(), &opts(), dir.path());
+    let name = path.file_name().unwrap().to_str().unwrap().to_owned();
+    let at = |n: &str| dir.path().join(n);
+    // A dead writer's file, and a live one's (held locked, as a writer holds its own).
+    std::fs::write(at(&format!(".{name}.dead01.tmp")), b"partial").unwrap();
+    let live = std::fs::File::create(at(&format!(".{name}.live01.tmp"))).unwrap();
+    // SAFETY: flock on a descriptor `live` owns and keeps open, with integer arguments only.
+    assert_eq!(unsafe { libc::flock(live.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) }, 0);
+    // Another file's temporary, and a file that only looks alike.
+    std::fs::write(at(".0123456789abcdef0123456789abcdef.rpbvh.dead02.tmp"), b"other").unwrap();
+    std::fs::write(at(&format!(".{name}.tmp")), b"not a temporary").unwrap();
+    // Another user's (when this test may make one).
+    let foreign = at(&format!(".{name}.their01.tmp"));
+    std::fs::write(&foreign, b"theirs").unwrap();
+    // SAFETY: geteuid has no preconditions.
+    let root = unsafe { libc::geteuid() } == 0;
+    if root {
+        std::os::unix::fs::chown(&foreign, Some(65534), Some(65534)).unwrap();
+    } else {
+        std::fs::remove_file(&foreign).unwrap();
+    }
+    let (_, _, r) = builder().commit_cached(&opts(), dir.path());
+    assert!(r.write_error.is_none(), "{r:?}");
+    let mut left: Vec<String> =
+        std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    left.sort();
+    let mut want = vec![
+        ".0123456789abcdef0123456789abcdef.rpbvh.dead02.tmp".to_string(),
+        format!(".{name}.live01.tmp"),
+        format!(".{name}.tmp"),
+        name.clone(),
+    ];
+    if root {
+        want.push(format!(".{name}.their01.tmp"));
+    }
+    want.sort();
+    assert_eq!(left, want);
+    drop(live);
+}

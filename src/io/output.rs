@@ -6,8 +6,9 @@
 //! neither be followed nor guessed. It is then renamed over the path. Before and again just
 //! before the rename, the path is checked ([`check_target`]): only a regular file is
 //! replaced, and never one of the command's inputs. A FIFO at the path is written into instead
-//! (the user named a pipe), when the caller allows it; a symbolic link, a device, a socket or
-//! a directory is refused. [`commit_all`] puts several files in place, both or neither.
+//! (the user named a pipe), when the caller allows it: the first check opens it, so a FIFO no
+//! process reads is refused before the command's work, and holds it open until the write; a
+//! symbolic link, a device, a socket or a directory is refused. [`commit_all`] puts several files in place, both or neither.
 //!
 //! What remains: another process that can write the directory may change what is at the path
 //! between the last check and the rename; the rename then replaces that entry itself (never
@@ -120,6 +121,7 @@ pub fn check_target(path: &Path, opts: &OutputOptions) -> Result<Target, OutputE
     }
     #[cfg(unix)]
     if opts.allow_fifo && std::os::unix::fs::FileTypeExt::is_fifo(&t) {
+        hold_fifo(path, &meta)?;
         return Ok(Target::Fifo);
     }
     Err(fail(
@@ -206,6 +208,14 @@ fn write_temporary(
         builder.permissions(std::fs::Permissions::from_mode(opts.mode));
     }
     let mut tmp = builder.tempfile_in(dir).map_err(io_error(path))?;
+    // Locked while it is written (the lock goes with the last descriptor, even on SIGKILL), so
+    // that [`remove_stale_temporaries`] can tell a live writer's file from a dead one's.
+    #[cfg(unix)]
+    {
+        use std::os::fd::AsRawFd;
+        // SAFETY: flock on a descriptor `tmp` owns and keeps open, with integer arguments only.
+        unsafe { libc::flock(tmp.as_file().as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) };
+    }
     let tmp_err = |source| OutputError { path: tmp.path().to_path_buf(), source };
     #[cfg(unix)]
     if opts.exact_mode {
@@ -267,23 +277,70 @@ fn check_regular(path: &Path, opts: &OutputOptions) -> Result<(), OutputError> {
     }
 }
 
-/// Writes `bytes` into the FIFO at `path`; fails at once when no process reads it.
+/// FIFOs opened for writing when their path was checked, held open until their bytes are
+/// written: the reader found then sees no end of file in between, and a FIFO without a
+/// reader is refused by the first check, before any work, not after it.
 #[cfg(unix)]
-fn write_fifo(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
-    use std::os::fd::AsRawFd;
+static HELD_FIFOS: std::sync::Mutex<Vec<std::fs::File>> = std::sync::Mutex::new(Vec::new());
+
+/// The device and inode of `meta`.
+#[cfg(unix)]
+fn identity(meta: &std::fs::Metadata) -> (u64, u64) {
+    use std::os::unix::fs::MetadataExt;
+    (meta.dev(), meta.ino())
+}
+
+/// Opens the FIFO at `path` for writing without waiting: fails at once when no process reads
+/// it.
+#[cfg(unix)]
+fn open_fifo(path: &Path) -> Result<std::fs::File, OutputError> {
     use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
-    let mut file = std::fs::OpenOptions::new()
+    let file = std::fs::OpenOptions::new()
         .write(true)
         // Non-blocking: an open for writing with no reader fails (ENXIO) instead of waiting.
         .custom_flags(libc::O_NONBLOCK | libc::O_NOCTTY | libc::O_NOFOLLOW)
         .open(path)
         .map_err(|e| match e.raw_os_error() {
-            Some(libc::ENXIO) => fail(path, std::io::ErrorKind::BrokenPipe, "is a FIFO that no process reads".into()),
+            Some(libc::ENXIO) => fail(
+                path,
+                std::io::ErrorKind::BrokenPipe,
+                "is a FIFO (named pipe) that no process reads; start its reader first".into(),
+            ),
             _ => io_error(path)(e),
         })?;
     if !file.metadata().map_err(io_error(path))?.file_type().is_fifo() {
         return Err(fail(path, std::io::ErrorKind::Other, "changed while the file was written".into()));
     }
+    Ok(file)
+}
+
+/// Makes sure the FIFO `meta` describes, at `path`, has a reader and stays open for the
+/// write ([`HELD_FIFOS`]).
+#[cfg(unix)]
+fn hold_fifo(path: &Path, meta: &std::fs::Metadata) -> Result<(), OutputError> {
+    let mut held = HELD_FIFOS.lock().unwrap_or_else(|e| e.into_inner());
+    if held.iter().any(|f| f.metadata().is_ok_and(|m| identity(&m) == identity(meta))) {
+        return Ok(());
+    }
+    held.push(open_fifo(path)?);
+    Ok(())
+}
+
+/// Writes `bytes` into the FIFO at `path` (through the descriptor its check opened, if it is
+/// the same FIFO); fails at once when no process reads it.
+#[cfg(unix)]
+fn write_fifo(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
+    use std::os::fd::AsRawFd;
+    let now = std::fs::symlink_metadata(path).map(|m| identity(&m)).ok();
+    let held = {
+        let mut held = HELD_FIFOS.lock().unwrap_or_else(|e| e.into_inner());
+        let at = held.iter().position(|f| f.metadata().is_ok_and(|m| Some(identity(&m)) == now));
+        at.map(|i| held.swap_remove(i))
+    };
+    let mut file = match held {
+        Some(f) => f,
+        None => open_fifo(path)?,
+    };
     // Blocking writes from here on: the reader sets the pace.
     let fd = file.as_raw_fd();
     // SAFETY: fcntl on a descriptor `file` owns and keeps open, with integer arguments only.
@@ -325,6 +382,49 @@ pub fn commit_all(staged: Vec<Staged>) -> Result<(), OutputError> {
         }
     }
     Ok(())
+}
+
+/// Removes the temporary files of `path` (`.NAME.XXXXXX.tmp` beside it) that a writer killed
+/// before it could remove them left behind: those owned by this user that no process holds
+/// locked (a live writer locks its temporary file until it is renamed into place). Returns how
+/// many were removed; a directory that cannot be read removes none.
+#[cfg(unix)]
+pub fn remove_stale_temporaries(path: &Path) -> usize {
+    use std::os::fd::AsRawFd;
+    use std::os::unix::fs::{MetadataExt, OpenOptionsExt};
+    let (dir, Some(name)) = (parent_dir(path), path.file_name()) else { return 0 };
+    let prefix = format!(".{}.", name.to_string_lossy());
+    let Ok(entries) = std::fs::read_dir(dir) else { return 0 };
+    // SAFETY: geteuid has no preconditions and cannot fail.
+    let me = unsafe { libc::geteuid() };
+    let mut removed = 0;
+    for entry in entries.flatten() {
+        let file_name = entry.file_name();
+        let n = file_name.to_string_lossy();
+        if !(n.starts_with(&prefix) && n.ends_with(".tmp") && n.len() > prefix.len() + ".tmp".len()) {
+            continue;
+        }
+        let p = entry.path();
+        let Ok(meta) = std::fs::symlink_metadata(&p) else { continue };
+        if !meta.is_file() || meta.uid() != me {
+            continue;
+        }
+        let opened = std::fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_NONBLOCK | libc::O_NOCTTY | libc::O_NOFOLLOW)
+            .open(&p);
+        let Ok(file) = opened else { continue };
+        // SAFETY: flock on a descriptor `file` owns and keeps open, with integer arguments only.
+        if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+            continue; // a live writer holds it
+        }
+        // Still the file that was opened (not replaced meanwhile): remove it.
+        let same = file.metadata().is_ok_and(|m| identity(&m) == identity(&meta));
+        if same && std::fs::symlink_metadata(&p).is_ok_and(|m| identity(&m) == identity(&meta)) {
+            removed += usize::from(std::fs::remove_file(&p).is_ok());
+        }
+    }
+    removed
 }
 
 /// Writes `bytes` to `path` with the default [`OutputOptions`]: whole or not at all, never

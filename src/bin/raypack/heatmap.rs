@@ -37,14 +37,14 @@ pub(crate) fn cmd_heatmap(a: RenderArgs) -> Result<(), CliError> {
     if a.brute_force {
         return Err(CliError::Usage("--integrator heatmap counts BVH traversal: --brute-force has none".into()));
     }
-    if a.threads == Some(0) {
-        return Err(CliError::Usage("-t 0: need at least one thread".into()));
-    }
+    crate::machine::check_threads(a.threads)?;
     let output = a.output.clone().unwrap_or_else(|| {
         let stem = a.scene.as_ref().and_then(|s| s.file_stem()).map(|s| s.to_string_lossy().into_owned());
         PathBuf::from(format!("{}-heatmap.png", stem.as_deref().unwrap_or("cornell")))
     });
-    if raypack::render::ImageFormat::of(&output) != raypack::render::ImageFormat::Png && output != Path::new("-") {
+    if raypack::render::ImageFormat::for_path(&output) != Some(raypack::render::ImageFormat::Png)
+        && output != Path::new("-")
+    {
         return Err(CliError::Usage(format!("-f {}: a heatmap is written as .png", output.display())));
     }
     let inputs: Vec<&Path> = [a.scene.as_deref(), a.camera.as_deref()].into_iter().flatten().collect();
@@ -67,11 +67,12 @@ pub(crate) fn cmd_heatmap(a: RenderArgs) -> Result<(), CliError> {
             scene.set_isa(isa).map_err(|e| CliError::Usage(e.to_string()))?;
         }
         let camera = file_camera.unwrap_or_else(|| scene.camera_or_framing(width as f32 / height as f32));
-        let which = match a.heatmap_rays {
+        let rays = a.heatmap_rays.unwrap_or(RaysArg::Camera);
+        let which = match rays {
             RaysArg::Camera => HeatmapRays::Camera,
             RaysArg::Shadow => HeatmapRays::Shadow,
         };
-        let view = match a.heatmap {
+        let view = match a.heatmap.unwrap_or(ViewArg::Nodes) {
             ViewArg::Nodes => HeatmapView::Nodes,
             ViewArg::Tests => HeatmapView::Tests,
             ViewArg::Both => HeatmapView::Both,
@@ -86,7 +87,7 @@ pub(crate) fn cmd_heatmap(a: RenderArgs) -> Result<(), CliError> {
         };
         eprintln!(
             "[raypack] Heatmap of {} rays ({} kernels, {:.4} s): nodes visited {}; primitive-block tests {}",
-            a.heatmap_rays.to_possible_value().map_or("camera".into(), |v| v.get_name().to_owned()),
+            rays.to_possible_value().map_or("camera".into(), |v| v.get_name().to_owned()),
             scene.isa(),
             t.elapsed().as_secs_f64(),
             stat(&counts.nodes),

@@ -237,12 +237,13 @@ struct RenderArgs {
     /// What to compute per camera ray.
     #[arg(long, value_enum, default_value_t = IntegratorArg::Global)]
     integrator: IntegratorArg,
-    /// With --integrator heatmap: which count the image shows.
-    #[arg(long, value_enum, default_value_t = heatmap::ViewArg::Nodes)]
-    heatmap: heatmap::ViewArg,
-    /// With --integrator heatmap: count camera rays, or shadow rays toward the first light.
-    #[arg(long, value_enum, default_value_t = heatmap::RaysArg::Camera)]
-    heatmap_rays: heatmap::RaysArg,
+    /// With --integrator heatmap: which count the image shows [default: nodes].
+    #[arg(long, value_enum)]
+    heatmap: Option<heatmap::ViewArg>,
+    /// With --integrator heatmap: count camera rays, or shadow rays toward the first light
+    /// [default: camera].
+    #[arg(long, value_enum)]
+    heatmap_rays: Option<heatmap::RaysArg>,
     /// Never terminate paths early by Russian roulette (only -m ends them).
     #[arg(long)]
     no_russian_roulette: bool,
@@ -480,15 +481,13 @@ fn main() -> ExitCode {
             return ExitCode::from(code);
         }
     };
-    match Isa::from_env() {
+    match Isa::env_report() {
         Err(e) => {
-            eprintln!("raypack: error: RAYPACK_ISA: {e}");
+            eprintln!("raypack: error: {e}");
             return ExitCode::from(2);
         }
-        Ok(Some(isa)) if !isa.is_supported() => {
-            eprintln!("[raypack] warning: RAYPACK_ISA={isa}: this CPU's best is {}; using it", Isa::detected());
-        }
-        _ => {}
+        Ok(Some(warning)) => eprintln!("[raypack] warning: {warning}"),
+        Ok(None) => {}
     }
     let result = match cli.command {
         Command::Render(a) => render::cmd_render(a),
@@ -565,7 +564,11 @@ fn commit(builder: SceneBuilder, opts: &BuildOptions, cache: Option<&Path>, quie
             for w in cache.warnings() {
                 eprintln!("[raypack] warning: {w}");
             }
-            let how = if cache.loaded { "Loaded BVH of" } else { "Built BVH (and cached it) from" };
+            let how = match (cache.loaded, &cache.write_error) {
+                (true, _) => "Loaded BVH of",
+                (false, None) => "Built BVH (and cached it) from",
+                (false, Some(_)) => "Built BVH (not cached) from",
+            };
             if !quiet {
                 eprintln!(
                     "[raypack] {how} {n} primitives: {} ({:.4} sec)",

@@ -19,6 +19,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         }
         return crate::heatmap::cmd_heatmap(a);
     };
+    check_ignored_flags(&a)?;
     let (width, height) = (a.resolution[0], a.resolution[1]);
     if width == 0 || height == 0 || width > 1 << 15 || height > 1 << 15 {
         return Err(CliError::Usage(format!("-r {width} {height}: width and height must be between 1 and 32768")));
@@ -31,9 +32,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             return Err(CliError::Usage(format!("-a {v:?}: expected a whole batch size >= 1 and a tolerance > 0")));
         }
     };
-    if a.threads == Some(0) {
-        return Err(CliError::Usage("-t 0: need at least one thread".into()));
-    }
+    crate::machine::check_threads(a.threads)?;
     let view = CameraFlags::parse(&a)?;
     let quiet = a.quiet;
     // Values raised to the least that works, said aloud (a warning, not a silent change).
@@ -83,10 +82,13 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         if render::ImageFormat::for_path(&output).is_none() {
             let can: Vec<String> =
                 render::ImageFormat::EXTENSIONS.iter().map(|(ext, what)| format!(".{ext} ({what})")).collect();
+            let what = match output.extension() {
+                Some(ext) => format!("raypack cannot write .{} images", ext.to_string_lossy()),
+                None => "the name has no extension to say the format".into(),
+            };
             return Err(CliError::Usage(format!(
-                "-o {}: raypack cannot write .{} images; it writes {}",
+                "-o {}: {what}; raypack writes {}",
                 output.display(),
-                output.extension().unwrap_or_default().to_string_lossy(),
                 can.join(" and ")
             )));
         }
@@ -100,7 +102,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         )));
     }
     let window = window.unwrap_or(render::PixelBounds::full(width, height));
-    if let Some(p) = &a.write_camera {
+    if let Some(p) = a.write_camera.as_deref().filter(|p| *p != Path::new("-")) {
         raypack::io::output::check_target(p, &out_opts)?;
     }
     let pool = rayon::ThreadPoolBuilder::new()
@@ -165,9 +167,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             view.apply(file_camera.unwrap_or_else(|| scene.camera_or_framing(aspect)), aspect, &scene.bounds())?;
         if let Some(p) = &a.write_camera {
             let text = raypack::io::camera_file::format_camera_file(&camera, view.target(), (width, height));
-            raypack::io::output::write_file_with(p, text.as_bytes(), &out_opts)?;
-            eprintln!("[raypack] Wrote the camera to {} (render from it with -c {0}); nothing rendered.", p.display());
-            return Ok(());
+            return write_camera(p, &text, &out_opts);
         }
         if let Some(why) = hemisphere_sees_no_light(&scene, &settings) {
             eprintln!("[raypack] warning: -H: {why}");
@@ -285,6 +285,39 @@ fn parse_window(a: &RenderArgs, width: usize, height: usize) -> Result<Option<re
         return render::PixelBounds::part(i, n, width, height).map(Some).map_err(|e| usage("--tile", e));
     }
     Ok(None)
+}
+
+/// Refuses flags that this render would ignore: the heatmap's outside `--integrator
+/// heatmap`, and an image name with `--write-camera` (which renders nothing).
+fn check_ignored_flags(a: &RenderArgs) -> Result<(), CliError> {
+    if a.heatmap.is_some() || a.heatmap_rays.is_some() {
+        let flag = if a.heatmap.is_some() { "--heatmap" } else { "--heatmap-rays" };
+        return Err(CliError::Usage(format!("{flag} applies only with --integrator heatmap")));
+    }
+    if let (Some(out), Some(_)) = (&a.output, &a.write_camera) {
+        return Err(CliError::Usage(format!(
+            "-o {} with --write-camera: --write-camera writes the camera and renders nothing; drop -o, or render \
+             from the camera file with -c",
+            out.display()
+        )));
+    }
+    Ok(())
+}
+
+/// Writes the camera file `text` to `path` (`-`: standard output, as for `-o -`).
+fn write_camera(path: &Path, text: &str, opts: &raypack::io::output::OutputOptions) -> Result<(), CliError> {
+    if path == Path::new("-") {
+        use std::io::Write;
+        let mut stdout = std::io::stdout().lock();
+        stdout
+            .write_all(text.as_bytes())
+            .and_then(|()| stdout.flush())
+            .map_err(|source| raypack::render::ImageError::Io { path: path.into(), source })?;
+        return Ok(());
+    }
+    raypack::io::output::write_file_with(path, text.as_bytes(), opts)?;
+    eprintln!("[raypack] Wrote the camera to {} (render from it with -c {0}); nothing rendered.", path.display());
+    Ok(())
 }
 
 /// `--lookat`, `--up` and `--fov`, checked.

@@ -33,7 +33,10 @@
 //! so that another user truncating the file during a render cannot kill it with `SIGBUS`.
 //! Files are written through [`crate::io::output`] (an unpredictable temporary name created
 //! exclusively, renamed over a regular file or nothing) with mode 0644, in a directory
-//! created with mode 0755; a directory that others can write is reported.
+//! created with mode 0755; a directory that others can write is reported. Before a file is
+//! written, the temporary files of its earlier writers that were killed mid-write (which
+//! nothing else removes) are removed: only this user's, and never one a live writer holds
+//! locked ([`crate::io::output::remove_stale_temporaries`]).
 //!
 //! Layout (little-endian, as the machine writes it):
 //!
@@ -467,6 +470,9 @@ fn store(dir: &Path, path: &Path, key: CacheKey, scene: &Scene) -> Result<(), Ca
     #[cfg(unix)]
     std::os::unix::fs::DirBuilderExt::mode(&mut create, 0o755);
     create.create(dir).map_err(io(dir))?;
+    // What writers of this file killed before they finished left behind (never another's).
+    #[cfg(unix)]
+    crate::io::output::remove_stale_temporaries(path);
     let mut w = SectionWriter::new();
     let bounds = [scene.bounds];
     push_accel(&mut w, scene, &bounds);
