@@ -64,6 +64,12 @@ class Sandbox(unittest.TestCase):
         """Every file under the destination (temporary files included)."""
         return sorted(str(p.relative_to(self.dest)) for p in self.dest.rglob("*") if p.is_file()) if self.dest.exists() else []
 
+    def empty_dirs(self):
+        """Every empty directory at or under the destination."""
+        if not self.dest.exists():
+            return []
+        return sorted(str(d) for d in [self.dest, *self.dest.rglob("*")] if d.is_dir() and not any(d.iterdir()))
+
 
 class PlainFiles(Sandbox):
     def test_a_good_file_lands_under_its_name_with_its_sha256(self):
@@ -95,6 +101,7 @@ class PlainFiles(Sandbox):
         self.assertIn(f"got {sha(data)}", err)
         self.assertFalse((self.dest / "cs184/sky/CBbad.dae").exists())
         self.assertEqual(self.leftovers(), [], "the temporary file must be removed")
+        self.assertEqual(self.empty_dirs(), [], "the directories made for it must be removed")
         self.assertNotIn("export RAYPACK_SCENES", out)
 
     def test_a_mismatch_does_not_replace_a_file_already_there(self):
@@ -274,7 +281,9 @@ class Archives(Sandbox):
         self.assertIn("refusing archive member '../evil.ply'", err)
         self.assertFalse((self.dest / "models/evil.ply").exists())
         self.assertFalse((self.dest.parent / "evil.ply").exists())
-        self.assertEqual([p for p in self.leftovers() if not p.startswith(".archives/")], [])
+        # Neither the downloaded archive nor an empty directory is left (both were, before).
+        self.assertEqual(self.leftovers(), [])
+        self.assertEqual(self.empty_dirs(), [])
 
     def test_an_absolute_or_link_member_is_refused(self):
         url, blob = self.make_tar({"recon/link.ply": None, "recon/ok.ply": b"ok\n"})
@@ -301,6 +310,34 @@ class Archives(Sandbox):
         self.assertEqual(code, 1)
         self.assertIn("sha256 mismatch", err)
         self.assertEqual(self.leftovers(), [])
+
+
+class Manifests(Sandbox):
+    def test_a_malformed_manifest_is_an_error_naming_the_field_not_a_traceback(self):
+        good = {"name": "cs184/a.dae", "url": "https://example.invalid/a.dae", "size": 3, "sha256": "ab" * 32}
+        member = {"member": "a/b.ply", "dest": "models/b.ply", "size": None, "sha256": None}
+        archive = {"name": "thing", "url": "https://example.invalid/t.tgz", "size": 9, "sha256": None, "members": [member]}
+        cases = [
+            ([1, 2], "expected an object, got list"),
+            ({"files": {"name": "x"}}, "files: expected a list"),
+            ({"files": ["x"]}, "files[0]: expected an object, got str"),
+            ({"files": [{**good, "name": None}]}, "files[0].name: expected a non-empty string, got None"),
+            ({"files": [{k: v for k, v in good.items() if k != "url"}]}, "files[0].url: expected a non-empty string"),
+            ({"files": [{**good, "size": "3"}]}, "files[0].size: expected a whole number of bytes or null, got '3'"),
+            ({"files": [{**good, "sha256": "nope"}]}, "files[0].sha256: expected 64 lowercase hex digits or null"),
+            ({"archives": [{**archive, "members": None}]}, "archives[0].members: expected a list, got None"),
+            ({"archives": [{k: v for k, v in archive.items() if k != "members"}]}, "archives[0].members: expected a list"),
+            ({"archives": [{**archive, "members": [{**member, "dest": 7}]}]}, "archives[0].members[0].dest: expected a non-empty string, got 7"),
+        ]
+        for data, message in cases:
+            m = self.tmp / "manifest.json"
+            m.write_text(json.dumps(data))
+            for extra in ((), ("--dry-run",)):
+                code, out, err = self.run_fetch("--manifest", m, "--dir", self.dest, *extra)
+                self.assertEqual(code, 1, (data, err))
+                self.assertIn(f"{m}: {message}", err)
+                self.assertNotIn("Traceback", err)
+            self.assertFalse(self.dest.exists())
 
 
 if __name__ == "__main__":
