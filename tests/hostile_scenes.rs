@@ -234,3 +234,28 @@ fn instancing_expansion_is_reported_and_capped_by_max_primitives() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("two.ply:element face: 2 triangles, more than --max-primitives 1"), "{err}");
 }
+
+#[test]
+fn a_small_file_cannot_need_gigabytes_unless_asked() {
+    let dir = tempfile::tempdir().unwrap();
+    // 9,800 triangles instanced 2^9 times: 5.0 M triangles (620 MB at its peak) from a file
+    // of a few hundred kilobytes, within the instancing budget. Before, loaded by default.
+    let doc = instanced_grid(70, 9);
+    let path = dir.path().join("inst.dae");
+    std::fs::write(&path, &doc).unwrap();
+    let cap = raypack::memory::default_max_primitives(doc.len() as u64);
+    assert!(cap < 5_017_600, "the default cap {cap} does not refuse this file");
+    let info = |extra: &[&str]| {
+        let args = [&["info", path.to_str().unwrap(), "--quality", "fast"][..], extra].concat();
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_raypack")).args(&args).output().unwrap();
+        (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+    };
+    let (code, err) = info(&[]);
+    assert_eq!(code, Some(2), "{err}");
+    let want = format!("more than the {cap} raypack allows a file of {} bytes without --max-primitives", doc.len());
+    assert!(err.contains("inst.dae:<node id=") && err.contains(&want), "{err}");
+    assert!(err.contains("give --max-primitives N to allow more"), "{err}");
+    // Asked for, it loads.
+    let (code, err) = info(&["--max-primitives", "5017600"]);
+    assert_eq!(code, Some(0), "{err}");
+}

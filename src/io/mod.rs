@@ -90,8 +90,13 @@ pub fn load_scene(path: &Path) -> Result<LoadedScene, LoadError> {
 pub struct LoadOptions {
     /// At most this many primitives (triangles plus spheres, after triangulation and
     /// instancing) in any format; `None`: no cap but COLLADA's instancing budget
-    /// ([`dae::INSTANCING_BUDGET_PER_BYTE`]). The CLI's `--max-primitives`.
+    /// ([`dae::INSTANCING_BUDGET_PER_BYTE`]) and [`LoadOptions::memory_cap`]. The CLI's
+    /// `--max-primitives`.
     pub max_primitives: Option<u64>,
+    /// Without [`LoadOptions::max_primitives`], cap the primitives at
+    /// [`crate::memory::default_max_primitives`] of the file's size (what the memory estimate
+    /// allows a file of that size without asking), with errors that say so. The CLI's default.
+    pub memory_cap: bool,
 }
 
 /// [`load_scene`] with limits. The file is read only if it is a regular file of at most
@@ -139,17 +144,49 @@ fn load_with(
     read_mtl: &dyn Fn(&Path) -> Result<Vec<u8>, String>,
     opts: &LoadOptions,
 ) -> Result<LoadedScene, LoadError> {
-    let (mut builder, warnings) = match format {
+    let default_cap = opts.max_primitives.is_none() && opts.memory_cap;
+    let max_primitives =
+        if default_cap { Some(crate::memory::default_max_primitives(bytes.len() as u64)) } else { opts.max_primitives };
+    let parsed = parse_capped(bytes, format, path, read_mtl, max_primitives, default_cap);
+    let (mut builder, warnings) = match (parsed, max_primitives) {
+        (Err(e), Some(max)) if default_cap => return Err(name_default_cap(e, max, bytes.len())),
+        (parsed, _) => parsed?,
+    };
+    let mut warnings: Vec<String> = warnings.into_iter().map(|w| format!("{}: {w}", path.display())).collect();
+    let mut synthesized = Vec::new();
+    if builder.lights().is_empty() {
+        let rig = default_light_rig(&builder.bounds(), builder.camera());
+        synthesized.push(Synthesized::DefaultLights { count: rig.len() });
+        for light in rig {
+            builder.add_light(light);
+        }
+        warnings
+            .push(format!("{}: no lights in the file; added the default light rig (one point light)", path.display()));
+    }
+    Ok(LoadedScene { builder, warnings, synthesized })
+}
+
+/// Parses `bytes` of `format` with at most `max_primitives` primitives; `default_cap`: that cap
+/// is raypack's default, which does not widen COLLADA's instancing budget as a user's does.
+fn parse_capped(
+    bytes: &[u8],
+    format: SceneFormat,
+    path: &Path,
+    read_mtl: &dyn Fn(&Path) -> Result<Vec<u8>, String>,
+    max_primitives: Option<u64>,
+    default_cap: bool,
+) -> Result<(SceneBuilder, Vec<String>), LoadError> {
+    Ok(match format {
         SceneFormat::Dae => {
             let text = std::str::from_utf8(bytes)
                 .map_err(|e| LoadError::parse(path, format!("byte {}", e.valid_up_to()), "not UTF-8 text"))?;
-            let dae_opts = DaeOptions { max_primitives: opts.max_primitives, ..DaeOptions::default() };
+            let dae_opts = DaeOptions { max_primitives, default_cap, ..DaeOptions::default() };
             dae::parse_dae(text, path, &dae_opts)?
         }
-        SceneFormat::Obj => obj::parse_obj_with_limit(bytes, path, read_mtl, opts.max_primitives)?,
+        SceneFormat::Obj => obj::parse_obj_with_limit(bytes, path, read_mtl, max_primitives)?,
         SceneFormat::Ply => {
             let mesh = ply::parse_ply(bytes, path)?;
-            if let Some(max) = opts.max_primitives.filter(|&max| mesh.triangles.len() as u64 > max) {
+            if let Some(max) = max_primitives.filter(|&max| mesh.triangles.len() as u64 > max) {
                 return Err(LoadError::parse(
                     path,
                     "element face",
@@ -167,19 +204,27 @@ fn load_with(
             }
             (b, w)
         }
-    };
-    let mut warnings: Vec<String> = warnings.into_iter().map(|w| format!("{}: {w}", path.display())).collect();
-    let mut synthesized = Vec::new();
-    if builder.lights().is_empty() {
-        let rig = default_light_rig(&builder.bounds(), builder.camera());
-        synthesized.push(Synthesized::DefaultLights { count: rig.len() });
-        for light in rig {
-            builder.add_light(light);
+    })
+}
+
+/// `e`, a loader's error, with the cap `max` it names (every loader says "more than
+/// --max-primitives N") named as raypack's default for a file of `file_len` bytes.
+fn name_default_cap(e: LoadError, max: u64, file_len: usize) -> LoadError {
+    let named = format!("more than --max-primitives {max}");
+    match e {
+        LoadError::Parse { path, location, message } if message.contains(&named) => {
+            use crate::memory::{DEFAULT_SCENE_BYTES, DEFAULT_SCENE_BYTES_PER_FILE_BYTE, SCENE_BYTES_PER_PRIMITIVE};
+            let default = format!(
+                "more than the {max} raypack allows a file of {file_len} bytes without --max-primitives ({} per byte, \
+                 at least {}, at most what fits in the memory available at {SCENE_BYTES_PER_PRIMITIVE} bytes each); \
+                 give --max-primitives N to allow more",
+                DEFAULT_SCENE_BYTES_PER_FILE_BYTE / SCENE_BYTES_PER_PRIMITIVE,
+                DEFAULT_SCENE_BYTES / SCENE_BYTES_PER_PRIMITIVE,
+            );
+            LoadError::Parse { path, location, message: message.replace(&named, &default) }
         }
-        warnings
-            .push(format!("{}: no lights in the file; added the default light rig (one point light)", path.display()));
+        e => e,
     }
-    Ok(LoadedScene { builder, warnings, synthesized })
 }
 
 /// The lights given to scenes that have none: one point light above and in front of the

@@ -447,7 +447,7 @@ impl SceneInfo {
 pub(crate) fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
     crate::machine::check_threads(a.threads)?;
     let mut opts = InfoOptions {
-        load: raypack::io::LoadOptions { max_primitives: a.max_primitives },
+        load: raypack::io::LoadOptions { max_primitives: a.max_primitives, memory_cap: true },
         cache_dir: a.bvh_cache.clone(),
         validate: a.validate,
         keep_bvh2: a.keep_bvh2,

@@ -146,9 +146,12 @@ struct BenchArgs {
 
 const MAX_PRIMITIVES_HELP: &str = "Refuse scenes of more than N triangles and spheres, counted after \
     triangulation and COLLADA instancing, with an error naming the line or element where the count \
-    passes N. Without it there is no cap, except that COLLADA instancing may expand a file to at most \
-    64 node visits, vertices, triangles and spheres per byte of the file (at least 2^20); with it, \
-    that budget becomes at least 4 per primitive allowed. A service sets its own cap here.";
+    passes N. Without it, a scene may have as many primitives as fit in 512 MB, or 512 bytes per byte \
+    of its file when that is more (128 bytes per primitive; only COLLADA instancing makes more than one \
+    primitive per byte), and never more than fit in the memory available; and COLLADA instancing may \
+    expand a file to at most 64 node visits, vertices, triangles and spheres per byte of the file (at \
+    least 2^20). With it, that budget becomes at least 4 per primitive allowed. A service sets its \
+    own cap here.";
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum IntegratorArg {
@@ -507,7 +510,7 @@ fn main() -> ExitCode {
 
 /// Loads SCENE (or the built-in Cornell box); returns the loader's warnings for printing.
 fn load(scene: Option<&Path>, max_primitives: Option<u64>) -> Result<(SceneBuilder, Vec<String>), CliError> {
-    let opts = raypack::io::LoadOptions { max_primitives };
+    let opts = raypack::io::LoadOptions { max_primitives, memory_cap: true };
     Ok(match scene {
         Some(p) => {
             let loaded = raypack::io::load_scene_with_options(p, &opts)?;
@@ -520,21 +523,10 @@ fn load(scene: Option<&Path>, max_primitives: Option<u64>) -> Result<(SceneBuild
 /// Refuses an image (or ray set) of `width × height` whose buffers, `needed` bytes in all
 /// (`per_pixel` per pixel), cannot fit in the memory this process may still use.
 fn check_memory(width: usize, height: usize, needed: u64, per_pixel: u64) -> Result<(), CliError> {
-    use raypack::memory::{available, human};
-    let Some(avail) = available() else { return Ok(()) };
-    if needed <= avail.bytes {
-        return Ok(());
-    }
-    // The largest image of the same shape that fits.
-    let scale = (avail.bytes as f64 / needed as f64).sqrt();
-    let (w, h) = (((width as f64 * scale) as usize).max(1), ((height as f64 * scale) as usize).max(1));
-    Err(CliError::Usage(format!(
-        "-r {width} {height}: needs about {} for the buffers that grow with the image ({per_pixel} bytes per pixel), but only {} \
-         can be allocated ({}); use a smaller size, such as -r {w} {h}",
-        human(needed),
-        human(avail.bytes),
-        avail.source
-    )))
+    raypack::memory::check_fits(width, height, needed, per_pixel).map_err(|e| {
+        let (w, h) = e.fits;
+        CliError::Usage(format!("-r {width} {height}: {e}; use a smaller size, such as -r {w} {h}"))
+    })
 }
 
 fn print_warnings(warnings: &[String]) {

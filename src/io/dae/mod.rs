@@ -101,6 +101,9 @@ pub struct DaeOptions {
     /// At most this many triangles plus spheres after instancing; `None`: only the
     /// per-byte instancing budget (see [`instancing_budget`]).
     pub max_primitives: Option<u64>,
+    /// `max_primitives` is raypack's default cap rather than the user's: it does not widen
+    /// the instancing budget.
+    pub default_cap: bool,
 }
 
 /// Parses a COLLADA document. `path` only names the file in errors. Returns the scene and
@@ -134,7 +137,8 @@ pub fn parse_dae(text: &str, path: &Path, opts: &DaeOptions) -> Result<(SceneBui
         meshes: HashMap::new(),
         camera: None,
         visiting: Vec::new(),
-        budget: budget_of(text.len(), opts.max_primitives),
+        budget: budget_of(text.len(), opts.max_primitives.filter(|_| !opts.default_cap)),
+        total_budget: budget_of(text.len(), opts.max_primitives.filter(|_| !opts.default_cap)),
         file_len: text.len(),
         max_primitives: opts.max_primitives,
         primitives: 0,
@@ -197,6 +201,8 @@ struct Ctx<'a, 'input> {
     visiting: Vec<roxmltree::NodeId>,
     /// What instancing may still add (see [`INSTANCING_BUDGET_PER_BYTE`]).
     budget: usize,
+    /// What it could add at the start.
+    total_budget: usize,
     /// The document's length in bytes.
     file_len: usize,
     /// [`DaeOptions::max_primitives`].

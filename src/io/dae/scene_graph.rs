@@ -145,8 +145,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     "instancing expands the scene past {} node visits, vertices, triangles and spheres (the cap for \
                      a file of {} bytes: {INSTANCING_BUDGET_PER_BYTE} per byte, at least {MIN_INSTANCING_BUDGET}, \
                      or {BUDGET_PER_ALLOWED_PRIMITIVE} per primitive --max-primitives allows)",
-                    budget_of(self.file_len, self.max_primitives),
-                    self.file_len
+                    self.total_budget, self.file_len
                 ),
             )),
         }
