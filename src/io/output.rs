@@ -10,6 +10,11 @@
 //! process reads is refused before the command's work, and holds it open until the write; a
 //! symbolic link, a device, a socket or a directory is refused. [`commit_all`] puts several files in place, both or neither.
 //!
+//! This is the one way raypack writes a file: images, camera files, `bench --json`, ray files,
+//! report pages and charts, and BVH cache files all go through [`stage`] (and
+//! [`write_file`], which stages and commits one file). `tests/one_reader_one_writer.rs` fails
+//! when a new write elsewhere bypasses it.
+//!
 //! What remains: another process that can write the directory may change what is at the path
 //! between the last check and the rename; the rename then replaces that entry itself (never
 //! what a link points to), so nothing outside the directory entry is written.
