@@ -1,10 +1,14 @@
 //! Reading numpy arguments: shapes and dtypes checked with errors that name the argument,
 //! arrays of float32 / float64 read in place whatever their strides (others converted once).
+//!
+//! The caller's arrays are read only while the GIL is held. Any Python thread can free an
+//! array's memory while the GIL is released (`ndarray.resize(refcheck=False)`, or
+//! `__setstate__`, which nothing can block: neither an exported buffer nor a weak reference
+//! stops it), so the queries copy the rays of each pass out under the GIL and trace the copy
+//! without it (`trace::passes`), taking fresh views of the arrays for every pass.
 
 use numpy::ndarray::{ArrayView1, ArrayView2, Ix1, Ix2};
-use numpy::{
-    PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArray, PyUntypedArrayMethods,
-};
+use numpy::{PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyFloat, PyInt};
@@ -12,10 +16,16 @@ use raypack::{Ray, Vec3};
 
 /// A numpy array of real numbers as the caller gave it (float32 or float64, any strides), or
 /// converted once to float64 from another real dtype (integers, float16, other byte orders,
-/// unaligned memory).
+/// unaligned memory). Its memory is viewed only with the GIL held ([`RealArray::view`]).
 pub enum RealArray<'py> {
-    F32(PyReadonlyArrayDyn<'py, f32>),
-    F64(PyReadonlyArrayDyn<'py, f64>),
+    F32(Bound<'py, PyArrayDyn<f32>>),
+    F64(Bound<'py, PyArrayDyn<f64>>),
+}
+
+/// The view of a [`RealArray`]'s elements, for as long as the GIL is held.
+pub enum RealView<'a> {
+    F32(numpy::ndarray::ArrayViewD<'a, f32>),
+    F64(numpy::ndarray::ArrayViewD<'a, f64>),
 }
 
 /// `obj` as an array of real numbers; `name` names the argument in errors.
@@ -25,11 +35,11 @@ pub fn real_array<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<RealArra
     // Unaligned arrays (views into packed records) and other byte orders are converted.
     let native = dtype.is_native_byteorder() != Some(false) && arr.is_aligned();
     match (dtype.kind(), dtype.itemsize(), native) {
-        (b'f', 4, true) => Ok(RealArray::F32(arr.cast::<PyArrayDyn<f32>>()?.readonly())),
-        (b'f', 8, true) => Ok(RealArray::F64(arr.cast::<PyArrayDyn<f64>>()?.readonly())),
+        (b'f', 4, true) => Ok(RealArray::F32(arr.cast::<PyArrayDyn<f32>>()?.clone())),
+        (b'f', 8, true) => Ok(RealArray::F64(arr.cast::<PyArrayDyn<f64>>()?.clone())),
         (b'f' | b'i' | b'u', _, _) => {
             let converted = arr.call_method1("astype", ("float64",))?.cast_into::<PyArrayDyn<f64>>()?;
-            Ok(RealArray::F64(converted.readonly()))
+            Ok(RealArray::F64(converted))
         }
         _ => Err(PyTypeError::new_err(format!(
             "{name}: expected an array of real numbers (float32 or float64), got dtype {}",
@@ -43,6 +53,22 @@ impl RealArray<'_> {
         match self {
             RealArray::F32(a) => a.shape(),
             RealArray::F64(a) => a.shape(),
+        }
+    }
+
+    /// The array's elements as they are now. `&self` holds the GIL (the `'py` of the bound
+    /// array), and the view lives no longer than this borrow: no Python code can run while it
+    /// is used, so none can free or move the memory under it.
+    pub fn view(&self) -> RealView<'_> {
+        // SAFETY: a read-only view of a live array (held by `self`), used only while the GIL
+        // is held (see above); raypack never writes the arrays it is given, and numpy's own
+        // borrow flags are not needed, since nothing else in this process writes them either
+        // while the GIL is held by this thread.
+        unsafe {
+            match self {
+                RealArray::F32(a) => RealView::F32(a.as_array()),
+                RealArray::F64(a) => RealView::F64(a.as_array()),
+            }
         }
     }
 }
@@ -98,30 +124,19 @@ pub fn points<'a>(arr: &'a RealArray<'_>, name: &str, one_allowed: bool) -> PyRe
         let expected = if one_allowed { "(K, 3) or (3,)" } else { "(N, 3)" };
         PyValueError::new_err(format!("{name}: expected shape {expected}, got {}", shape_str(shape)))
     };
-    match shape {
-        [_, 3] => Ok(match arr {
-            // `to_slice`: only row-major (C-contiguous) arrays, not Fortran-ordered ones.
-            RealArray::F32(a) => match a.as_array().to_slice() {
-                Some(rows) => Points::Rows32(rows),
-                None => Points::Strided32(a.as_array().into_dimensionality::<Ix2>().map_err(|_| bad())?),
-            },
-            RealArray::F64(a) => match a.as_array().to_slice() {
-                Some(rows) => Points::Rows64(rows),
-                None => Points::Strided64(a.as_array().into_dimensionality::<Ix2>().map_err(|_| bad())?),
-            },
+    match (shape, arr.view()) {
+        // `to_slice`: only row-major (C-contiguous) arrays, not Fortran-ordered ones.
+        ([_, 3], RealView::F32(a)) => Ok(match a.to_slice() {
+            Some(rows) => Points::Rows32(rows),
+            None => Points::Strided32(a.into_dimensionality::<Ix2>().map_err(|_| bad())?),
         }),
-        [3] if one_allowed => {
-            let p = match arr {
-                RealArray::F32(a) => {
-                    let a = a.as_array();
-                    Vec3::new(a[[0]], a[[1]], a[[2]])
-                }
-                RealArray::F64(a) => {
-                    let a = a.as_array();
-                    Vec3::new(a[[0]] as f32, a[[1]] as f32, a[[2]] as f32)
-                }
-            };
-            Ok(Points::Same(p))
+        ([_, 3], RealView::F64(a)) => Ok(match a.to_slice() {
+            Some(rows) => Points::Rows64(rows),
+            None => Points::Strided64(a.into_dimensionality::<Ix2>().map_err(|_| bad())?),
+        }),
+        ([3], RealView::F32(a)) if one_allowed => Ok(Points::Same(Vec3::new(a[[0]], a[[1]], a[[2]]))),
+        ([3], RealView::F64(a)) if one_allowed => {
+            Ok(Points::Same(Vec3::new(a[[0]] as f32, a[[1]] as f32, a[[2]] as f32)))
         }
         _ => Err(bad()),
     }
@@ -177,21 +192,13 @@ pub fn column_arg<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<ColumnAr
     }
     let arr = real_array(obj, name)?;
     if arr.shape().is_empty() {
-        let x = match &arr {
-            RealArray::F32(a) => *a.as_array().first().expect("0-d array has one element"),
-            RealArray::F64(a) => *a.as_array().first().expect("0-d array has one element") as f32,
+        let x = match arr.view() {
+            RealView::F32(a) => *a.first().expect("0-d array has one element"),
+            RealView::F64(a) => *a.first().expect("0-d array has one element") as f32,
         };
         return Ok(ColumnArg::Number(x));
     }
     Ok(ColumnArg::Array(arr))
-}
-
-/// The column of `arg`, checked to have `rays` values when it is an array and no value below
-/// zero ([`not_negative`]).
-pub fn column<'a>(arg: &'a ColumnArg<'_>, name: &str, rays: usize) -> PyResult<Column<'a>> {
-    let column = column_unchecked(arg, name, rays)?;
-    not_negative(&column, name)?;
-    Ok(column)
 }
 
 /// A `ValueError` naming `name` (and the ray) for the first value below zero as the tracer
@@ -212,6 +219,8 @@ fn not_negative(column: &Column<'_>, name: &str) -> PyResult<()> {
     }
 }
 
+/// The column of `arg`, checked to have `rays` values when it is an array (its values are
+/// checked by [`not_negative`], once per query: [`RayArgs::rays`]).
 fn column_unchecked<'a>(arg: &'a ColumnArg<'_>, name: &str, rays: usize) -> PyResult<Column<'a>> {
     match arg {
         ColumnArg::Number(x) => Ok(Column::Same(*x)),
@@ -225,9 +234,9 @@ fn column_unchecked<'a>(arg: &'a ColumnArg<'_>, name: &str, rays: usize) -> PyRe
             if arr.shape() != [rays] {
                 return Err(bad());
             }
-            Ok(match arr {
-                RealArray::F32(a) => Column::F32(a.as_array().into_dimensionality::<Ix1>().map_err(|_| bad())?),
-                RealArray::F64(a) => Column::F64(a.as_array().into_dimensionality::<Ix1>().map_err(|_| bad())?),
+            Ok(match arr.view() {
+                RealView::F32(a) => Column::F32(a.into_dimensionality::<Ix1>().map_err(|_| bad())?),
+                RealView::F64(a) => Column::F64(a.into_dimensionality::<Ix1>().map_err(|_| bad())?),
             })
         }
     }
@@ -296,7 +305,8 @@ impl Rays<'_> {
     }
 }
 
-/// The arguments of a ray query, owned (borrowed from Python) until the query returns.
+/// The arguments of a ray query, held (references to the caller's arrays) until the query
+/// returns; their memory is read only through [`RayArgs::rays`], with the GIL held.
 pub struct RayArgs<'py> {
     origins: RealArray<'py>,
     directions: RealArray<'py>,
@@ -320,8 +330,20 @@ impl<'py> RayArgs<'py> {
         })
     }
 
-    /// The rays, with every count checked against the others.
+    /// The rays, with every count checked against the others and no `tnear` or `tfar` below
+    /// zero: views of the arrays as they are now, for as long as this borrow (and the GIL)
+    /// lasts.
     pub fn rays(&self) -> PyResult<Rays<'_>> {
+        let rays = self.rays_of_pass()?;
+        not_negative(&rays.tnear, "tnear")?;
+        not_negative(&rays.tfar, "tfar")?;
+        Ok(rays)
+    }
+
+    /// [`RayArgs::rays`] without the scan of `tnear` and `tfar` for values below zero: the
+    /// views a query's later passes take afresh (`trace::passes`), once [`RayArgs::rays`]
+    /// checked the values at its start.
+    pub fn rays_of_pass(&self) -> PyResult<Rays<'_>> {
         let origins = points(&self.origins, "origins", true)?;
         let directions = points(&self.directions, "directions", true)?;
         let len = match (origins.rows(), directions.rows()) {
@@ -333,8 +355,8 @@ impl<'py> RayArgs<'py> {
             (Some(n), _) | (None, Some(n)) => n,
             (None, None) => 1,
         };
-        let tnear = column(&self.tnear, "tnear", len)?;
-        let tfar = column(&self.tfar, "tfar", len)?;
+        let tnear = column_unchecked(&self.tnear, "tnear", len)?;
+        let tfar = column_unchecked(&self.tfar, "tfar", len)?;
         Ok(Rays { origins, directions, tnear, tfar, len })
     }
 }

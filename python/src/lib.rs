@@ -6,6 +6,7 @@
 //! the library into a `RuntimeError` instead of unwinding into the interpreter.
 
 mod args;
+mod checks;
 mod trace;
 
 use args::RayArgs;
@@ -62,9 +63,14 @@ impl PoolCache {
     /// `None`: the global pool (all cores, or `RAYON_NUM_THREADS`).
     fn get(&self, threads: Option<usize>) -> PyResult<Option<Arc<rayon::ThreadPool>>> {
         let Some(n) = threads else { return Ok(None) };
-        if n == 0 {
-            return Err(PyValueError::new_err("threads: expected None (all cores) or at least 1, got 0"));
-        }
+        raypack::methods::check_threads(n).map_err(|e| {
+            PyValueError::new_err(format!(
+                "threads: expected None (all cores) or 1 to {} threads ({} per logical CPU; this machine has {}), got {n}",
+                e.max,
+                raypack::methods::THREADS_PER_CPU,
+                e.cpus
+            ))
+        })?;
         let mut cached = self.0.lock().unwrap_or_else(|e| e.into_inner());
         if let Some((m, pool)) = cached.as_ref()
             && *m == n
@@ -130,8 +136,20 @@ struct BuildArgs {
 }
 
 impl BuildArgs {
-    fn new(quality: &str, watertight: bool, bvh_cache: Option<PathBuf>, threads: Option<usize>) -> PyResult<Self> {
+    fn new(
+        py: Python<'_>,
+        quality: &str,
+        watertight: bool,
+        bvh_cache: Option<PathBuf>,
+        threads: Option<usize>,
+    ) -> PyResult<Self> {
+        checks::isa_env(py)?;
         let opts = BuildOptions { quality: parse_quality(quality)?, watertight, ..BuildOptions::default() };
+        if bvh_cache.as_ref().is_some_and(|p| p.as_os_str().is_empty()) {
+            return Err(PyValueError::new_err(
+                "bvh_cache: expected a directory, got an empty path (give '.' for the current directory)",
+            ));
+        }
         Ok(Self { opts, cache: bvh_cache, threads })
     }
 }
@@ -217,7 +235,7 @@ impl PyScene {
         bvh_cache: Option<PathBuf>,
         threads: Option<usize>,
     ) -> PyResult<Self> {
-        let build = BuildArgs::new(quality, watertight, bvh_cache, threads)?;
+        let build = BuildArgs::new(py, quality, watertight, bvh_cache, threads)?;
         let positions = args::vertices(vertices)?;
         let indices = args::faces(faces, positions.len())?;
         // As a PLY file of these triangles loads: one default material, area-weighted vertex
@@ -272,8 +290,7 @@ impl PyScene {
         threads: Option<usize>,
     ) -> PyResult<Hits> {
         let a = RayArgs::new(origins, directions, tnear, tfar)?;
-        let rays = a.rays()?;
-        let k = rays.len;
+        let k = a.rays()?.len;
         // SAFETY (all five): uninitialised numpy arrays (`np.empty`; zeroing them cost 4 ns per
         // ray), of which `trace::intersect` writes every element before Python can see them
         // (on an error or panic they are dropped unseen).
@@ -285,7 +302,7 @@ impl PyScene {
         {
             let (mut tw, mut pw, mut uw, mut vw, mut nw) =
                 (t.readwrite(), prim.readwrite(), u.readwrite(), v.readwrite(), normal.readwrite());
-            let out = HitArrays {
+            let mut out = HitArrays {
                 t: tw.as_slice_mut()?,
                 prim: pw.as_slice_mut()?,
                 u: uw.as_slice_mut()?,
@@ -293,7 +310,8 @@ impl PyScene {
                 normal: nw.as_slice_mut()?,
             };
             let target = self.target();
-            run_detached(py, &self.pools, threads, move || trace::intersect(target, rays, out))?;
+            let each = &mut |start, rays: &[raypack::Ray]| trace::intersect(target, rays, out.range(start, rays.len()));
+            trace::passes(py, &self.pools, threads, &a, k, each)?;
         }
         Ok(Hits {
             t: t.into_any().unbind(),
@@ -317,14 +335,17 @@ impl PyScene {
         threads: Option<usize>,
     ) -> PyResult<Bound<'py, PyArray1<bool>>> {
         let a = RayArgs::new(origins, directions, tnear, tfar)?;
-        let rays = a.rays()?;
+        let k = a.rays()?.len;
         // SAFETY: `np.empty`, every element written by `trace::occluded` (as in `intersect`).
-        let out = unsafe { PyArray1::<bool>::new(py, rays.len, false) };
+        let out = unsafe { PyArray1::<bool>::new(py, k, false) };
         {
             let mut w = out.readwrite();
             let slice = w.as_slice_mut()?;
             let target = self.target();
-            run_detached(py, &self.pools, threads, move || trace::occluded(target, rays, slice))?;
+            let each = &mut |start, rays: &[raypack::Ray]| {
+                trace::occluded(target, rays, &mut slice[start..start + rays.len()])
+            };
+            trace::passes(py, &self.pools, threads, &a, k, each)?;
         }
         Ok(out)
     }
@@ -356,11 +377,13 @@ impl PyScene {
             return Err(PyValueError::new_err(format!("min_step: expected a finite distance >= 0, got {min_step}")));
         }
         let a = RayArgs::new(origins, directions, tnear, tfar)?;
-        let rays = a.rays()?;
+        let k = a.rays()?.len;
         let target = self.target();
-        let all = run_detached(py, &self.pools, threads, move || {
-            trace::intersect_all(target, rays, max_hits, min_step as f32)
-        })?;
+        let mut all = trace::AllHits::default();
+        let each = &mut |start, rays: &[raypack::Ray]| {
+            all.append(trace::intersect_all(target, rays, start, max_hits, min_step as f32))
+        };
+        trace::passes(py, &self.pools, threads, &a, k, each)?;
         Ok((
             PyArray1::from_vec(py, all.ray),
             PyArray1::from_vec(py, all.prim),
@@ -558,7 +581,7 @@ fn load(
     bvh_cache: Option<PathBuf>,
     threads: Option<usize>,
 ) -> PyResult<PyScene> {
-    let build = BuildArgs::new(quality, watertight, bvh_cache, threads)?;
+    let build = BuildArgs::new(py, quality, watertight, bvh_cache, threads)?;
     load_path(py, &path, &build)
 }
 
@@ -650,13 +673,21 @@ fn render<'py>(
         max_sample_value: None,
         pixel_culling: true,
     };
+    let build_given = (quality, watertight, bvh_cache.is_some()) != ("medium", false, false);
+    let build = BuildArgs::new(py, quality, watertight, bvh_cache, threads)?;
+    checks::render_memory(&settings, threads)?;
     let loaded;
     let bound;
     let s: &PyScene = if let Ok(s) = scene.cast::<PyScene>() {
+        if build_given {
+            return Err(PyValueError::new_err(
+                "quality, watertight, bvh_cache: they build a scene from a file; this raypack.Scene is built \
+                 already (give them to raypack.Scene or raypack.load)",
+            ));
+        }
         bound = s.clone();
         bound.get()
     } else if let Ok(path) = scene.extract::<PathBuf>() {
-        let build = BuildArgs::new(quality, watertight, bvh_cache, threads)?;
         loaded = load_path(py, &path, &build)?;
         &loaded
     } else {
@@ -704,6 +735,7 @@ fn _ray_sets<'py>(
     seed: u64,
 ) -> PyResult<Bound<'py, PyDict>> {
     use raypack::raysets;
+    checks::ray_sets_size(width, height)?;
     let s = &scene.get().scene;
     let sets = run_detached(py, &scene.get().pools, None, || {
         let camera = raysets::primary_for_scene(s, width, height);
@@ -785,17 +817,21 @@ fn _plane_points<'py>(
     {
         let mut w = out.readwrite();
         let o = w.as_slice_mut()?;
+        // Copied with the GIL held, and the arrays released before it is not (see `args`).
         let (v, f, tr, r, tt, or, di) = (
-            vertices.as_slice()?,
-            faces.as_slice()?,
-            tri.as_slice()?,
-            ray.as_slice()?,
-            t.as_slice()?,
-            origins.as_slice()?,
-            directions.as_slice()?,
+            vertices.as_slice()?.to_vec(),
+            faces.as_slice()?.to_vec(),
+            tri.as_slice()?.to_vec(),
+            ray.as_slice()?.to_vec(),
+            t.as_slice()?.to_vec(),
+            origins.as_slice()?.to_vec(),
+            directions.as_slice()?.to_vec(),
         );
-        run_detached(py, &PoolCache::default(), None, move || trace::plane_points(v, f, (tr, r, tt), (or, di), o))?
-            .map_err(PyValueError::new_err)?;
+        drop((vertices, faces, tri, ray, t, origins, directions));
+        run_detached(py, &PoolCache::default(), None, move || {
+            trace::plane_points(&v, &f, (&tr, &r, &tt), (&or, &di), o)
+        })?
+        .map_err(PyValueError::new_err)?;
     }
     Ok(out)
 }

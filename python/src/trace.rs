@@ -1,14 +1,63 @@
-//! The parallel loops behind `Scene.intersect` / `occluded`: rays are built from the numpy
-//! arrays a chunk at a time inside each rayon task (no whole copy of the rays), traced with
-//! the scene's 16-ray packet kernels (`Scene::intersect_batch` / `occluded_batch`) and
-//! written straight into the output arrays.
+//! The parallel loops behind `Scene.intersect` / `occluded`: rays are copied from the numpy
+//! arrays a pass at a time with the GIL held ([`passes`]: no whole copy of the rays, and no
+//! Python thread can free an array while it is read), traced with the GIL released by the
+//! scene's 16-ray packet kernels (`Scene::intersect_batch` / `occluded_batch`) and written
+//! straight into the output arrays (which no Python code can reach before they are returned).
 
-use crate::args::Rays;
+use crate::args::RayArgs;
+use crate::{PoolCache, run_detached};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
 use rayon::prelude::*;
 use raypack::{Hit, Ray, Scene, Vec3};
 
 /// Rays per rayon task (as the library's own streams).
 pub const CHUNK: usize = 1024;
+
+/// Rays per pass: copied from the caller's arrays with the GIL held, then traced without it.
+/// 2 MiB of rays: the copy adds that to a query's memory, and a pass is long enough that
+/// taking the GIL back between passes costs nothing measurable.
+pub const PASS: usize = 1 << 16;
+
+/// Runs `each(start, rays)` on the rays of `args` (`len` of them) pass by pass: each pass's
+/// rays are copied out of the arrays with the GIL held (in parallel on the pool of `threads`),
+/// then `each` runs with the GIL released on that pool, panics turned into `RuntimeError`.
+/// The arrays are viewed afresh for every pass: one that another thread resized meanwhile is
+/// a `ValueError`, never a read of freed memory.
+pub fn passes(
+    py: Python<'_>,
+    pools: &PoolCache,
+    threads: Option<usize>,
+    args: &RayArgs<'_>,
+    len: usize,
+    each: &mut (dyn FnMut(usize, &[Ray]) + Send),
+) -> PyResult<()> {
+    let pool = pools.get(threads)?;
+    let mut buf = vec![Ray::new(Vec3::ZERO, Vec3::X); PASS.min(len)];
+    for start in (0..len).step_by(PASS) {
+        let n = PASS.min(len - start);
+        let resized = |now: String| {
+            PyValueError::new_err(format!(
+                "origins, directions, tnear, tfar: an array was resized while the query ran ({len} rays at the start; \
+                 now {now})"
+            ))
+        };
+        let rays = args.rays_of_pass().map_err(|e| resized(e.to_string()))?;
+        if rays.len != len {
+            return Err(resized(format!("{} rays", rays.len)));
+        }
+        let fill = |pass: &mut [Ray]| {
+            pass.par_chunks_mut(CHUNK).enumerate().for_each(|(k, c)| rays.fill(start + k * CHUNK, c))
+        };
+        match &pool {
+            Some(pool) => pool.install(|| fill(&mut buf[..n])),
+            None => fill(&mut buf[..n]),
+        }
+        let pass = &buf[..n];
+        run_detached(py, pools, threads, || each(start, pass))?;
+    }
+    Ok(())
+}
 
 /// The output arrays of a closest-hit query, one entry (three for `normal`) per ray.
 pub struct HitArrays<'a> {
@@ -17,6 +66,20 @@ pub struct HitArrays<'a> {
     pub u: &'a mut [f32],
     pub v: &'a mut [f32],
     pub normal: &'a mut [f32],
+}
+
+impl HitArrays<'_> {
+    /// The entries of rays `start .. start + n`.
+    pub fn range(&mut self, start: usize, n: usize) -> HitArrays<'_> {
+        let r = start..start + n;
+        HitArrays {
+            t: &mut self.t[r.clone()],
+            prim: &mut self.prim[r.clone()],
+            u: &mut self.u[r.clone()],
+            v: &mut self.v[r],
+            normal: &mut self.normal[3 * start..3 * (start + n)],
+        }
+    }
 }
 
 /// A scene and how its primitive ids map to the ids the caller knows.
@@ -49,19 +112,17 @@ impl Target<'_> {
 }
 
 /// Closest hits of `rays` into `out` (misses: `t = inf`, `prim = -1`, `u = v = 0`, normal 0).
-pub fn intersect(target: Target<'_>, rays: Rays<'_>, out: HitArrays<'_>) {
+pub fn intersect(target: Target<'_>, rays: &[Ray], out: HitArrays<'_>) {
     let HitArrays { t, prim, u, v, normal } = out;
     (t.par_chunks_mut(CHUNK), prim.par_chunks_mut(CHUNK), u.par_chunks_mut(CHUNK), v.par_chunks_mut(CHUNK))
         .into_par_iter()
         .zip(normal.par_chunks_mut(3 * CHUNK))
-        .enumerate()
+        .zip(rays.par_chunks(CHUNK))
         .for_each_init(
-            // Whole-chunk buffers, filled anew by every chunk (`intersect_batch` writes every hit).
-            || (vec![Ray::new(Vec3::ZERO, Vec3::X); CHUNK], vec![Hit::MISS; CHUNK]),
-            |(ray_buf, hit_buf), (k, ((t, prim, u, v), normal))| {
-                let n = t.len();
-                let (ray_buf, hit_buf) = (&mut ray_buf[..n], &mut hit_buf[..n]);
-                rays.fill(k * CHUNK, ray_buf);
+            // A whole-chunk buffer, filled anew by every chunk (`intersect_batch` writes every hit).
+            || vec![Hit::MISS; CHUNK],
+            |hit_buf, (((t, prim, u, v), normal), ray_buf)| {
+                let hit_buf = &mut hit_buf[..ray_buf.len()];
                 target.scene.intersect_batch(ray_buf, hit_buf);
                 // The normals below read each hit triangle's corners: fetched for the whole
                 // chunk first. Stanford dragon (871k triangles), 1M diffuse rays
@@ -92,15 +153,10 @@ pub fn intersect(target: Target<'_>, rays: Rays<'_>, out: HitArrays<'_>) {
 }
 
 /// Whether anything blocks each of `rays` over `[tnear, tfar]`, into `out`.
-pub fn occluded(target: Target<'_>, rays: Rays<'_>, out: &mut [bool]) {
-    out.par_chunks_mut(CHUNK).enumerate().for_each_init(
-        || vec![Ray::new(Vec3::ZERO, Vec3::X); CHUNK],
-        |ray_buf, (k, out)| {
-            let ray_buf = &mut ray_buf[..out.len()];
-            rays.fill(k * CHUNK, ray_buf);
-            target.scene.occluded_batch(ray_buf, out);
-        },
-    );
+pub fn occluded(target: Target<'_>, rays: &[Ray], out: &mut [bool]) {
+    out.par_chunks_mut(CHUNK)
+        .zip(rays.par_chunks(CHUNK))
+        .for_each(|(out, rays)| target.scene.occluded_batch(rays, out));
 }
 
 /// All hits along each ray, nearest first, at most `max_hits` per ray.
@@ -113,18 +169,31 @@ pub struct AllHits {
     pub v: Vec<f32>,
 }
 
-/// Every hit along each of `rays` (up to `max_hits`): after a hit at `t` the ray goes on
-/// from `t + min_step / |dir|`, so surfaces closer than `min_step` (a distance) behind a hit,
-/// such as the neighbour of a shared edge, are not reported twice. Ordered by ray, then `t`.
-pub fn intersect_all(target: Target<'_>, rays: Rays<'_>, max_hits: usize, min_step: f32) -> AllHits {
-    let parts: Vec<AllHits> = (0..rays.len.div_ceil(CHUNK))
-        .into_par_iter()
-        .map(|k| {
-            let (start, end) = (k * CHUNK, ((k + 1) * CHUNK).min(rays.len));
+impl AllHits {
+    /// Appends `other`'s hits (of later rays).
+    pub fn append(&mut self, mut other: AllHits) {
+        self.ray.append(&mut other.ray);
+        self.prim.append(&mut other.prim);
+        self.t.append(&mut other.t);
+        self.u.append(&mut other.u);
+        self.v.append(&mut other.v);
+    }
+}
+
+/// Every hit along each of `rays` (up to `max_hits`), ray `i` numbered `first + i`: after a
+/// hit at `t` the ray goes on from `t + min_step / |dir|`, so surfaces closer than `min_step`
+/// (a distance) behind a hit, such as the neighbour of a shared edge, are not reported twice.
+/// Ordered by ray, then `t`.
+pub fn intersect_all(target: Target<'_>, rays: &[Ray], first: usize, max_hits: usize, min_step: f32) -> AllHits {
+    let parts: Vec<AllHits> = rays
+        .par_chunks(CHUNK)
+        .enumerate()
+        .map(|(k, chunk)| {
+            let start = first + k * CHUNK;
             // Every hit as (ray within the chunk, hit), pass by pass: nearest first per ray.
             let mut hits: Vec<(u32, Hit)> = Vec::new();
             // The rays still going, as (index within the chunk, ray).
-            let mut live: Vec<(u32, Ray)> = (start..end).map(|i| ((i - start) as u32, rays.get(i))).collect();
+            let mut live: Vec<(u32, Ray)> = chunk.iter().enumerate().map(|(i, r)| (i as u32, *r)).collect();
             let mut batch: Vec<Ray> = Vec::with_capacity(live.len());
             let mut found: Vec<Hit> = Vec::with_capacity(live.len());
             for _ in 0..max_hits {
