@@ -197,14 +197,10 @@ fn check_bvh8<T: TriBlock>(g: &Geometry, bvh8: &Bvh8<T>) -> Result<Aabb, AccelEr
             }
         }
     }
-    // In block order already, as the collapse lays blocks out in leaf order (sorted when not).
-    for claims in [&mut tri_claims, &mut sphere_claims] {
-        if !claims.is_sorted_by_key(|c| c.block) {
-            claims.par_sort_by_key(|c| c.block);
-        }
-    }
+    // By block (a counting sort), with where each block's claims start.
+    let (tri_claims, tri_starts) = by_block(&tri_claims, bvh8.tris.len());
+    let (sphere_claims, sphere_starts) = by_block(&sphere_claims, bvh8.spheres.len());
     let cover = Coverage::new(g.len());
-
     let test: TriangleTest = bvh8.test;
     // Per block: what the builder would store, compared byte for byte; then each claimed
     // lane's primitive against the claiming leaf's box.
@@ -246,7 +242,8 @@ fn check_bvh8<T: TriBlock>(g: &Geometry, bvh8: &Bvh8<T>) -> Result<Aabb, AccelEr
                 block.prim(lane)
             ));
         }
-        let parts = cover.claimed(claims_of(&tri_claims, k), |lane| (block.prim(lane), boxes[lane]));
+        let claims = &tri_claims[tri_starts[k] as usize..tri_starts[k + 1] as usize];
+        let parts = cover.claimed(claims, |lane| (block.prim(lane), boxes[lane]));
         Ok((union, parts))
     });
     let spheres = bvh8.spheres.par_iter().enumerate().map(|(k, block)| {
@@ -268,7 +265,8 @@ fn check_bvh8<T: TriBlock>(g: &Geometry, bvh8: &Bvh8<T>) -> Result<Aabb, AccelEr
         if bytemuck::bytes_of(&want) != bytemuck::bytes_of(block) {
             return fail(format!("sphere block {k} does not hold the scene's spheres (or their padding)"));
         }
-        let parts = cover.claimed(claims_of(&sphere_claims, k), |lane| (block.prim[lane], boxes[lane]));
+        let claims = &sphere_claims[sphere_starts[k] as usize..sphere_starts[k + 1] as usize];
+        let parts = cover.claimed(claims, |lane| (block.prim[lane], boxes[lane]));
         Ok((union, parts))
     });
     let merge = |a: Result<(Aabb, Vec<(u32, Aabb)>), AccelError>, b: Result<(Aabb, Vec<(u32, Aabb)>), AccelError>| {
@@ -279,15 +277,27 @@ fn check_bvh8<T: TriBlock>(g: &Geometry, bvh8: &Bvh8<T>) -> Result<Aabb, AccelEr
     let empty = || Ok((Aabb::EMPTY, Vec::new()));
     let (union, parts) = merge(tris.reduce(empty, merge), spheres.reduce(empty, merge))?;
     cover.finish(g, parts)?;
-
     Ok(union)
 }
 
-/// The claims on block `k` in `claims` (sorted by block).
-fn claims_of(claims: &[Claim], k: usize) -> &[Claim] {
-    let start = claims.partition_point(|c| (c.block as usize) < k);
-    let end = start + claims[start..].partition_point(|c| c.block as usize == k);
-    &claims[start..end]
+/// `claims` on `blocks` blocks ordered by block, and where each block's start: block `k`'s are
+/// `starts[k] .. starts[k + 1]`.
+fn by_block(claims: &[Claim], blocks: usize) -> (Vec<Claim>, Vec<u32>) {
+    let mut starts = vec![0u32; blocks + 1];
+    for c in claims {
+        starts[c.block as usize + 1] += 1;
+    }
+    for k in 0..blocks {
+        starts[k + 1] += starts[k];
+    }
+    let mut next = starts.clone();
+    let mut sorted = claims.to_vec();
+    for c in claims {
+        let at = &mut next[c.block as usize];
+        sorted[*at as usize] = *c;
+        *at += 1;
+    }
+    (sorted, starts)
 }
 
 /// [`check_bvh8`]'s boxes for the binary BVH: child boxes inside their parents', primitives
