@@ -1,5 +1,5 @@
-"""Tracing adds no more memory than its output arrays: rays are built a chunk at a time
-inside each thread, never copied whole (Linux: peak RSS from /proc/self/status)."""
+"""Tracing adds no more memory than its output arrays: rays are copied a pass at a time
+(2 MiB), never whole (Linux: peak RSS from /proc/self/status)."""
 
 from __future__ import annotations
 
