@@ -114,9 +114,11 @@ def main() -> None:
     # The rays on the workers, for (b).
     import dask.array as da
 
-    o_on = client.persist(da.from_array(origins, chunks=(chunk, 3)))
-    d_on = client.persist(da.from_array(directions, chunks=(chunk, 3)))
-    wait([o_on, d_on])
+    # Origins and directions made together, each chunk's on one worker, as a graph that
+    # generates rays there would leave them.
+    on_workers = client.persist(da.from_array(np.concatenate([origins, directions], axis=1), chunks=(chunk, 6)))
+    wait(on_workers)
+    o_on, d_on = on_workers[:, :3], on_workers[:, 3:]
     one, inout, onw, r_inout, r_onw = [], [], [], [], []
     for r in range(args.rounds):
         t = time.perf_counter()

@@ -175,23 +175,30 @@ class DaskHits(NamedTuple):
         return self.prim >= 0
 
 
-def _intersect_chunk(scene: _raypack.Scene, rays: tuple[Any, ...]) -> tuple[np.ndarray, ...]:
-    origins, directions, tnear, tfar = rays
-    return tuple(scene.intersect(origins, directions, tnear, tfar, threads=_task_threads()))
+def _rays(rays: tuple[Any, ...]) -> tuple[Any, ...]:
+    """``(origins, directions, tnear, tfar)`` from a task's arguments: those four, or one
+    tuple of them (a numpy chunk scattered whole)."""
+    return rays[0] if len(rays) == 1 else rays
 
 
-def _occluded_chunk(scene: _raypack.Scene, rays: tuple[Any, ...]) -> np.ndarray:
-    origins, directions, tnear, tfar = rays
-    return scene.occluded(origins, directions, tnear, tfar, threads=_task_threads())
+def _intersect_chunk(scene: _raypack.Scene, *rays: Any) -> tuple[np.ndarray, ...]:
+    return tuple(scene.intersect(*_rays(rays), threads=_task_threads()))
+
+
+def _occluded_chunk(scene: _raypack.Scene, *rays: Any) -> np.ndarray:
+    return scene.occluded(*_rays(rays), threads=_task_threads())
 
 
 def _chunks(
     origins: Any, directions: Any, tnear: Any, tfar: Any, chunk_rays: int, client: Any
 ) -> tuple[list[Any], list[int]]:
-    """The rays as a list of ``(origins, directions, tnear, tfar)`` chunks (delayed values or
-    futures) and the rays in each. numpy inputs are cut into chunks of ``chunk_rays`` rays,
-    on a cluster each sent once to one worker; dask arrays keep their row chunks (the other
-    arrays are rechunked to them)."""
+    """The rays as a list of chunks, the arguments of each chunk's task (``(origins,
+    directions, tnear, tfar)``, delayed values or numbers, or one future or delayed value of
+    that tuple), and the rays in each. numpy inputs are cut into chunks of ``chunk_rays``
+    rays, on a cluster each chunk's arrays sent together once to one worker; dask arrays keep
+    their row chunks (the other arrays are rechunked to them), and their blocks go to the
+    tracing task directly, where they are (no task in between that would gather them onto
+    one worker first)."""
     dask, da = _modules()
     if chunk_rays < 1:
         raise ValueError(f"chunk_rays: expected at least 1, got {chunk_rays}")
@@ -213,7 +220,7 @@ def _chunks(
         for i in range(len(rows)):
             tn = e_blocks["tnear"][i] if "tnear" in e_blocks else tnear
             tf = e_blocks["tfar"][i] if "tfar" in e_blocks else tfar
-            chunks.append(dask.delayed(tuple, pure=True)([o_blocks[i], d_blocks[i], tn, tf]))
+            chunks.append((o_blocks[i], d_blocks[i], tn, tf))
         return chunks, list(rows)
     o, d = np.asarray(origins), np.asarray(directions)
     if o.ndim != 2 or o.shape[1] != 3:
@@ -232,9 +239,10 @@ def _chunks(
         pieces.append((o[start:end], d[start:end], tn, tf))
         rows.append(end - start)
     if client is not None:
-        # Each chunk straight to one worker, rather than the whole arrays into the graph.
-        return client.scatter(pieces), rows
-    return [dask.delayed(p, traverse=False) for p in pieces], rows
+        # Each chunk's arrays straight to one worker together, rather than the whole arrays
+        # into the graph.
+        return [(f,) for f in client.scatter(pieces)], rows
+    return [(dask.delayed(p, traverse=False),) for p in pieces], rows
 
 
 def intersect(
@@ -258,7 +266,7 @@ def intersect(
     outputs: list[list[Any]] = [[], [], [], [], []]
     specs = [((), np.float32), ((), np.int64), ((), np.float32), ((), np.float32), ((3,), np.float32)]
     for chunk, n in zip(chunks, rows):
-        hits = dask.delayed(_intersect_chunk, pure=True, nout=5)(shared, chunk)
+        hits = dask.delayed(_intersect_chunk, pure=True, nout=5)(shared, *chunk)
         for k, (tail, dtype) in enumerate(specs):
             outputs[k].append(da.from_delayed(hits[k], shape=(n, *tail), dtype=dtype))
     return DaskHits(*(da.concatenate(o) for o in outputs))
@@ -280,7 +288,7 @@ def occluded(
     shared = _share(scene, client)
     chunks, rows = _chunks(origins, directions, tnear, tfar, chunk_rays, client)
     blocks = [
-        da.from_delayed(dask.delayed(_occluded_chunk, pure=True)(shared, chunk), shape=(n,), dtype=bool)
+        da.from_delayed(dask.delayed(_occluded_chunk, pure=True)(shared, *chunk), shape=(n,), dtype=bool)
         for chunk, n in zip(chunks, rows)
     ]
     return da.concatenate(blocks)
