@@ -38,7 +38,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-import raypack
+import pyraypack
 
 SCENES = ["cs184/meshedit/beetle.dae", "cs184/sky/CBbunny.dae", "models/stanford-dragon-871k.ply"]
 
@@ -72,14 +72,14 @@ def timed(f, runs: int) -> float:
     return statistics.median(times)
 
 
-def ray_sets(scene: raypack.Scene, min_rays: int, seed: int):
+def ray_sets(scene: pyraypack.Scene, min_rays: int, seed: int):
     """The camera, diffuse and shadow sets, at an image size with at least `min_rays` camera hits."""
-    probe = raypack._raypack._ray_sets(scene, 160, 120, seed)
+    probe = pyraypack._raypack._ray_sets(scene, 160, 120, seed)
     fraction = max(len(probe["diffuse"][0]) / (160 * 120), 1e-3)
     pixels = max(min_rays / fraction * 1.02, min_rays)
     height = int(np.ceil(np.sqrt(pixels * 3 / 4) / 4) * 4)
     width = int(np.ceil(height * 4 / 3 / 4) * 4)
-    return (width, height), raypack._raypack._ray_sets(scene, width, height, seed)
+    return (width, height), pyraypack._raypack._ray_sets(scene, width, height, seed)
 
 
 def split(n: int, parts: int):
@@ -176,8 +176,8 @@ def main() -> int:
     rows = []
     for path in paths:
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore", raypack.SceneWarning)
-            scene = raypack.load(path)
+            warnings.simplefilter("ignore", pyraypack.SceneWarning)
+            scene = pyraypack.load(path)
         vertices, faces = scene.vertices, scene.faces
         (w, h), sets = ray_sets(scene, args.min_rays, args.seed)
         for threads in args.threads:

@@ -3,16 +3,16 @@
 
     RAYPACK_SCENES=../shared/scenes python tools/bench-split.py [--rounds 3]
 
-Needs the package (`pip install .`) with dask (`pip install raypack[dask]`). Starts a Dask
+Needs the package (`pip install .`) with dask (`pip install pyraypack[dask]`). Starts a Dask
 `LocalCluster` of 2 single-thread worker processes and measures, in interleaved rounds (one
 process, then the cluster, round after round):
 
-* render: CBbunny at 480x360, 64 spp, max depth 5: `raypack.render(path, threads=2)` against
-  `raypack.dask.render(path, tiles=4)` on the cluster, both from the scene's path (load and
+* render: CBbunny at 480x360, 64 spp, max depth 5: `pyraypack.render(path, threads=2)` against
+  `pyraypack.dask.render(path, tiles=4)` on the cluster, both from the scene's path (load and
   BVH build included); samples per second;
 * rays: 10M diffuse bounces on the 871k-triangle Stanford dragon (ten 1M-ray sets of
   `raypack bench`'s diffuse rays with different seeds) through `Scene.intersect(threads=2)`
-  against `raypack.dask.intersect` in 1M-ray chunks: (a) numpy arrays in and out (rays
+  against `pyraypack.dask.intersect` in 1M-ray chunks: (a) numpy arrays in and out (rays
   scattered from this process, every output gathered back), (b) rays already on the workers
   and hits left there (persisted), the cluster's own throughput; Mrays/s;
 * the bytes of the scene each worker receives (its pickle, sent once per worker).
@@ -62,14 +62,14 @@ def main() -> None:
     args = ap.parse_args()
     if not args.scenes:
         raise SystemExit("bench-split: set RAYPACK_SCENES (or --scenes) to the third-party scenes")
-    import raypack
-    import raypack.dask
+    import pyraypack
+    import pyraypack.dask
     from dask.distributed import Client, LocalCluster, wait
 
     scenes = pathlib.Path(args.scenes)
     bunny = scenes / "cs184" / "sky" / "CBbunny.dae"
     dragon = scenes / "models" / "stanford-dragon-871k.ply"
-    warnings.simplefilter("ignore", raypack.SceneWarning)
+    warnings.simplefilter("ignore", pyraypack.SceneWarning)
     print(f"machine: {cpu()}")
     cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
     client = Client(cluster)
@@ -82,10 +82,10 @@ def main() -> None:
     one, split, ratios = [], [], []
     for r in range(args.rounds):
         t = time.perf_counter()
-        whole = raypack.render(bunny, width=w, height=h, threads=2, **settings)
+        whole = pyraypack.render(bunny, width=w, height=h, threads=2, **settings)
         a = time.perf_counter() - t
         t = time.perf_counter()
-        parts = raypack.dask.render(bunny, w, h, tiles=4, **settings)
+        parts = pyraypack.dask.render(bunny, w, h, tiles=4, **settings)
         b = time.perf_counter() - t
         if r == 0:
             assert np.array_equal(whole, parts), "the split render differs from the whole one"
@@ -97,8 +97,8 @@ def main() -> None:
           f"4 parts over 2x1-thread workers {spread(split)} Msamples/s; ratio {spread(ratios)}")
 
     # Rays.
-    scene = raypack.load(dragon)
-    sets = [raypack._raypack._ray_sets(scene, 2100, 2100, seed=s)["diffuse"] for s in range(args.rays_million)]
+    scene = pyraypack.load(dragon)
+    sets = [pyraypack._raypack._ray_sets(scene, 2100, 2100, seed=s)["diffuse"] for s in range(args.rays_million)]
     n_each = min(len(s[0]) for s in sets)
     origins = np.concatenate([s[0][:n_each] for s in sets])
     directions = np.concatenate([s[1][:n_each] for s in sets])
@@ -108,7 +108,7 @@ def main() -> None:
           f"sent once to each of {len(client.nthreads())} workers")
     chunk = 1 << 20
     ref = scene.intersect(origins, directions, threads=2)
-    hits = raypack.dask.intersect(scene, origins, directions, chunk_rays=chunk)
+    hits = pyraypack.dask.intersect(scene, origins, directions, chunk_rays=chunk)
     got = client.compute(list(hits), sync=True)
     assert all(np.array_equal(x, y) for x, y in zip(got, ref)), "the chunked hits differ"
     # The rays on the workers, for (b).
@@ -125,10 +125,10 @@ def main() -> None:
         scene.intersect(origins, directions, threads=2)
         a = time.perf_counter() - t
         t = time.perf_counter()
-        client.compute(list(raypack.dask.intersect(scene, origins, directions, chunk_rays=chunk)), sync=True)
+        client.compute(list(pyraypack.dask.intersect(scene, origins, directions, chunk_rays=chunk)), sync=True)
         b = time.perf_counter() - t
         t = time.perf_counter()
-        kept = client.persist(list(raypack.dask.intersect(scene, o_on, d_on)))
+        kept = client.persist(list(pyraypack.dask.intersect(scene, o_on, d_on)))
         wait(kept)
         c = time.perf_counter() - t
         del kept
@@ -139,7 +139,7 @@ def main() -> None:
         r_onw.append(a / c)
         print(f"  rays round {r}: Scene.intersect {a:.3f} s, dask numpy in/out {b:.3f} s (ratio {a / b:.3f}), "
               f"dask on the workers {c:.3f} s (ratio {a / c:.3f})")
-    print(f"rays: Scene.intersect (2 threads) {spread(one)} Mrays/s; raypack.dask.intersect in 1M-ray chunks: "
+    print(f"rays: Scene.intersect (2 threads) {spread(one)} Mrays/s; pyraypack.dask.intersect in 1M-ray chunks: "
           f"numpy in and out {spread(inout)} Mrays/s (ratio {spread(r_inout)}), "
           f"rays and hits on the workers {spread(onw)} Mrays/s (ratio {spread(r_onw)})")
     client.close()

@@ -15,7 +15,7 @@ import numpy as np
 import trimesh
 from trimesh.ray.ray_pyembree import RayMeshIntersector as EmbreeIntersector
 
-import raypack.trimesh
+import pyraypack.trimesh
 
 
 def per_call(f, n):
@@ -39,7 +39,7 @@ def median_time(f, runs=5):
 def main():
     mesh = trimesh.creation.icosphere()
     o, d = [[0, 0, -5], [2, 2, -10]], [[0, 0, 1], [0, 0, 1]]
-    for name, rmi in [("raypack", raypack.trimesh.RayMeshIntersector(mesh)), ("trimesh embree", EmbreeIntersector(mesh))]:
+    for name, rmi in [("raypack", pyraypack.trimesh.RayMeshIntersector(mesh)), ("trimesh embree", EmbreeIntersector(mesh))]:
         mesh.ray = rmi
         loc, ir, _ = mesh.ray.intersects_location(ray_origins=o, ray_directions=d)
         us = per_call(lambda: mesh.ray.intersects_location(ray_origins=o, ray_directions=d), 2000) * 1e6
@@ -50,7 +50,7 @@ def main():
     n = 1_000_000
     org = np.column_stack([rng.uniform(b[0, 0], b[1, 0], n), rng.uniform(b[0, 1], b[1, 1], n), np.full(n, b[0, 2] - 1)])
     dirs = np.tile([0.0, 0.0, 1.0], (n, 1))
-    for name, rmi in [("raypack", raypack.trimesh.RayMeshIntersector(dragon)), ("trimesh embree", EmbreeIntersector(dragon))]:
+    for name, rmi in [("raypack", pyraypack.trimesh.RayMeshIntersector(dragon)), ("trimesh embree", EmbreeIntersector(dragon))]:
         first = median_time(lambda: rmi.intersects_first(org, dirs))
         loc = median_time(lambda: rmi.intersects_location(org, dirs, multiple_hits=False))
         multi = median_time(lambda: rmi.intersects_id(org, dirs, multiple_hits=True), runs=3)

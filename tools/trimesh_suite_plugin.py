@@ -3,7 +3,7 @@ engine where trimesh would use its embree one, and counts the ray queries that e
 
 ``-p trimesh_suite_plugin --ray-engine=raypack`` makes ``trimesh.ray.ray_pyembree.
 RayMeshIntersector`` (what ``Trimesh(use_embree=True)``, trimesh's default, and the tests that
-name it construct) a counting subclass of ``raypack.trimesh.RayMeshIntersector``;
+name it construct) a counting subclass of ``pyraypack.trimesh.RayMeshIntersector``;
 ``--ray-engine=embree`` leaves trimesh's embree intersector in place (it needs embreex) and
 counts its queries. Either way the plugin checks at start-up that a fresh ``Trimesh`` gets
 the chosen engine, and fails the session if that engine answered no query. With
@@ -44,10 +44,10 @@ def pytest_addoption(parser):
 
 
 def _swap_in_raypack():
-    import raypack.trimesh
+    import pyraypack.trimesh
     import trimesh.ray
 
-    class RaypackIntersector(raypack.trimesh.RayMeshIntersector):
+    class RaypackIntersector(pyraypack.trimesh.RayMeshIntersector):
         """raypack's adapter, counting the rays it traces."""
 
         def _rays(self, ray_origins, ray_directions):

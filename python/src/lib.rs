@@ -1,4 +1,4 @@
-//! `raypack._raypack`: the Python module. numpy in, numpy out, in the vocabulary of the Rust
+//! `pyraypack._raypack`: the Python module. numpy in, numpy out, in the vocabulary of the Rust
 //! API ([`raypack::Scene`], [`raypack::Hit`]) and of Embree.
 //!
 //! Every entry point checks its arguments under the GIL (errors name the argument, its shape
@@ -158,11 +158,11 @@ impl BuildArgs {
 ///
 /// ``Scene(vertices, faces, *, quality="medium", watertight=False, bvh_cache=None, threads=None)``
 /// builds one from a ``(N, 3)`` array of vertex positions (any real dtype, rounded to float32)
-/// and an ``(M, 3)`` integer array of vertex indices; ``raypack.load(path)`` reads a scene file.
+/// and an ``(M, 3)`` integer array of vertex indices; ``pyraypack.load(path)`` reads a scene file.
 /// Faces with NaN/Inf or huge coordinates, zero area or collinear corners cannot be traced:
 /// they are dropped, counted in ``report`` and announced by a ``SceneWarning``; ``prim`` ids
 /// still index the ``faces`` given.
-#[pyclass(name = "Scene", module = "raypack", frozen)]
+#[pyclass(name = "Scene", module = "pyraypack", frozen)]
 struct PyScene {
     scene: Scene,
     /// The options the BVH was built with (a pickle carries them: the snapshot's key covers
@@ -249,14 +249,14 @@ impl PyScene {
             b.add_light(light);
         }
         drop((positions, normals));
-        let mut scene = Self::commit(py, b, &build, "raypack.Scene")?;
+        let mut scene = Self::commit(py, b, &build, "pyraypack.Scene")?;
         let r = &scene.report;
         if r.dropped() > 0 {
             scene.prim_map = Some(kept_face_map(&indices, &scene.scene.triangles.indices));
             warn(
                 py,
                 &format!(
-                    "raypack.Scene: dropped {} of {} faces ({} with NaN/Inf or huge coordinates, {} with zero area or collinear corners); they are never hit",
+                    "pyraypack.Scene: dropped {} of {} faces ({} with NaN/Inf or huge coordinates, {} with zero area or collinear corners); they are never hit",
                     r.dropped(),
                     indices.len(),
                     r.dropped_non_finite,
@@ -456,7 +456,7 @@ impl PyScene {
     }
 
     fn __repr__(&self) -> String {
-        format!("<raypack.Scene: {} triangles, {} spheres>", self.scene.num_triangles(), self.scene.num_spheres())
+        format!("<pyraypack.Scene: {} triangles, {} spheres>", self.scene.num_triangles(), self.scene.num_spheres())
     }
 
     /// A token of the scene's contents for Dask (``dask.base.tokenize``): equal for scenes
@@ -470,7 +470,7 @@ impl PyScene {
         if let Some(m) = &self.prim_map {
             h.update(&u32_bytes(m));
         }
-        format!("raypack.Scene-{:032x}", h.digest128())
+        format!("pyraypack.Scene-{:032x}", h.digest128())
     }
 
     /// Pickling: the scene travels whole, BVH included, so that a process unpickling it
@@ -484,7 +484,7 @@ impl PyScene {
         let prim_map = self.prim_map.as_ref().map(|m| PyBytes::new(py, &u32_bytes(m)));
         let r = &self.report;
         let report = (r.triangles, r.spheres, r.dropped_non_finite, r.dropped_degenerate, r.dropped_spheres);
-        let rebuild = py.import("raypack._raypack")?.getattr("_scene_from_snapshot")?;
+        let rebuild = py.import("pyraypack._raypack")?.getattr("_scene_from_snapshot")?;
         let args = (PyBytes::new(py, &bytes), prim_map, report).into_pyobject(py)?;
         Ok((rebuild, args))
     }
@@ -506,7 +506,7 @@ fn _scene_from_snapshot(
 ) -> PyResult<PyScene> {
     let pools = PoolCache::default();
     let (scene, opts) = run_detached(py, &pools, None, || Scene::from_snapshot(snapshot))?
-        .map_err(|e| PyValueError::new_err(format!("raypack.Scene: cannot unpickle: {e}")))?;
+        .map_err(|e| PyValueError::new_err(format!("pyraypack.Scene: cannot unpickle: {e}")))?;
     let prim_map = match prim_map {
         None => None,
         Some(b) => {
@@ -514,7 +514,7 @@ fn _scene_from_snapshot(
             // The caller's face indices of the kept faces: increasing, one per triangle.
             if b.len() % 4 != 0 || map.len() != scene.num_triangles() || map.windows(2).any(|w| w[0] >= w[1]) {
                 return Err(PyValueError::new_err(
-                    "raypack.Scene: cannot unpickle: the face map does not fit the scene's triangles",
+                    "pyraypack.Scene: cannot unpickle: the face map does not fit the scene's triangles",
                 ));
             }
             Some(map)
@@ -522,7 +522,7 @@ fn _scene_from_snapshot(
     };
     let (triangles, spheres, dropped_non_finite, dropped_degenerate, dropped_spheres) = report;
     if (triangles, spheres) != (scene.num_triangles(), scene.num_spheres()) {
-        return Err(PyValueError::new_err("raypack.Scene: cannot unpickle: the report does not fit the scene"));
+        return Err(PyValueError::new_err("pyraypack.Scene: cannot unpickle: the report does not fit the scene"));
     }
     let report = CommitReport { triangles, spheres, dropped_non_finite, dropped_degenerate, dropped_spheres };
     Ok(PyScene { scene, opts, prim_map, report, cache: None, pools })
@@ -532,7 +532,7 @@ fn _scene_from_snapshot(
 /// ``prim`` (int64, ``-1`` on a miss), ``u``, ``v`` (float32 barycentrics of the second and
 /// third vertex, 0 on a miss) and ``normal`` (float32 ``(K, 3)``, unit geometric normal
 /// ``(v1 - v0) x (v2 - v0)``, zero on a miss). Unpacks as ``t, prim, u, v, normal = hits``.
-#[pyclass(name = "Hits", module = "raypack", frozen)]
+#[pyclass(name = "Hits", module = "pyraypack", frozen)]
 struct Hits {
     #[pyo3(get)]
     t: Py<PyAny>,
@@ -566,7 +566,7 @@ impl Hits {
     fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
         let n = self.t.bind(py).len()?;
         let hits: usize = self.hit(py)?.call_method0("sum")?.extract()?;
-        Ok(format!("<raypack.Hits: {hits} of {n} rays hit>"))
+        Ok(format!("<pyraypack.Hits: {hits} of {n} rays hit>"))
     }
 }
 
@@ -610,7 +610,7 @@ fn load_path(py: Python<'_>, path: &Path, build: &BuildArgs) -> PyResult<PyScene
 /// ``pixel_bounds=(x0, x1, y0, y1)`` (pixels, ends exclusive) render only that window of the
 /// ``width x height`` image and return its pixels, ``(y1 - y0, x1 - x0, 3)``: each has, bit for
 /// bit, its value in the whole image, whatever the window and the thread count
-/// (``raypack.tile_bounds`` gives the windows of ``raypack render --tile``).
+/// (``pyraypack.tile_bounds`` gives the windows of ``raypack render --tile``).
 #[pyfunction]
 #[pyo3(signature = (scene, *, spp = 1, max_depth = 1, light_samples = 1, width = 480, height = 360, seed = 0,
     integrator = "global", hemisphere = false, russian_roulette = true, threads = None, quality = "medium",
@@ -681,8 +681,8 @@ fn render<'py>(
     let s: &PyScene = if let Ok(s) = scene.cast::<PyScene>() {
         if build_given {
             return Err(PyValueError::new_err(
-                "quality, watertight, bvh_cache: they build a scene from a file; this raypack.Scene is built \
-                 already (give them to raypack.Scene or raypack.load)",
+                "quality, watertight, bvh_cache: they build a scene from a file; this pyraypack.Scene is built \
+                 already (give them to pyraypack.Scene or pyraypack.load)",
             ));
         }
         bound = s.clone();
@@ -692,7 +692,7 @@ fn render<'py>(
         &loaded
     } else {
         return Err(PyTypeError::new_err(format!(
-            "scene: expected a raypack.Scene or a path to a scene file, got {}",
+            "scene: expected a pyraypack.Scene or a path to a scene file, got {}",
             scene.get_type().name()?
         )));
     };
@@ -793,7 +793,7 @@ fn _intersect_stream<'py>(
     ))
 }
 
-/// Hit locations in float64 for `raypack.trimesh` (see `trace::plane_points`): `vertices`
+/// Hit locations in float64 for `pyraypack.trimesh` (see `trace::plane_points`): `vertices`
 /// `(N, 3)` float64 and `faces` `(M, 3)` int64 of the caller's mesh, per hit its triangle,
 /// ray and `t`, and the rays `(n, 3)` float64. Not part of the public API.
 #[pyfunction]

@@ -1,4 +1,4 @@
-"""raypack.Scene / load on closed forms, every array layout, and against the Rust API."""
+"""pyraypack.Scene / load on closed forms, every array layout, and against the Rust API."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import warnings
 import numpy as np
 import pytest
 
-import raypack
+import pyraypack
 from conftest import grid, random_rays, scenes_dir, soup, uv_sphere
 
 TRI_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float64)
@@ -15,7 +15,7 @@ TRI_F = np.array([[0, 1, 2]])
 
 
 def test_one_triangle_closed_form():
-    scene = raypack.Scene(TRI_V, TRI_F)
+    scene = pyraypack.Scene(TRI_V, TRI_F)
     hits = scene.intersect(np.array([[0.25, 0.5, 2.0], [2.0, 2.0, 2.0]]), np.array([[0, 0, -1.0], [0, 0, -1.0]]))
     assert hits.t.dtype == np.float32 and hits.prim.dtype == np.int64 and hits.normal.shape == (2, 3)
     assert hits.t.tolist() == [2.0, np.inf]
@@ -29,7 +29,7 @@ def test_one_triangle_closed_form():
 
 
 def test_t_is_in_units_of_the_direction_and_the_interval_is_closed():
-    scene = raypack.Scene(TRI_V, TRI_F)
+    scene = pyraypack.Scene(TRI_V, TRI_F)
     o = [0.25, 0.25, 2.0]
     assert scene.intersect(o, [[0, 0, -2.0]]).t.tolist() == [1.0]
     # [tnear, tfar]: a hit at exactly tfar counts, and one at exactly tnear too.
@@ -45,7 +45,7 @@ def test_t_is_in_units_of_the_direction_and_the_interval_is_closed():
 def test_a_ray_starting_on_a_surface_hits_it_at_t_zero():
     # From a point of the triangle, either way (tnear = 0 counts): t = +0.0, the point's
     # barycentrics; occluded too. With tnear above 0 the ray leaves it behind.
-    scene = raypack.Scene(TRI_V, TRI_F)
+    scene = pyraypack.Scene(TRI_V, TRI_F)
     o, d = [0.25, 0.5, 0.0], np.array([[0, 0, -1.0], [0, 0, 1.0], [0.3, -0.2, 1.0]])
     hits = scene.intersect(o, d)
     assert hits.prim.tolist() == [0, 0, 0] and hits.t.tolist() == [0.0] * 3
@@ -58,14 +58,14 @@ def test_a_ray_starting_on_a_surface_hits_it_at_t_zero():
     assert scene.intersect(o, d, tnear=-0.0, tfar=np.array([-0.0, 0.0, -1e-50])).t.tolist() == [0.0] * 3
     # Every hit along a ray from a surface: that surface first, then the others, each once
     # (a layer of two parallel triangles 1 apart), with min_step 0 too.
-    two = raypack.Scene(np.vstack([TRI_V, TRI_V - [0, 0, 1]]), np.array([[0, 1, 2], [3, 4, 5]]))
+    two = pyraypack.Scene(np.vstack([TRI_V, TRI_V - [0, 0, 1]]), np.array([[0, 1, 2], [3, 4, 5]]))
     for step in (0.0, 1e-3):
         ray, prim, t, _, _ = two.intersect_all(o, [[0, 0, -1.0]], min_step=step)
         assert (ray.tolist(), prim.tolist(), t.tolist()) == ([0, 0], [0, 1], [0.0, 1.0])
 
 
 def test_invalid_rays_miss():
-    scene = raypack.Scene(TRI_V, TRI_F)
+    scene = pyraypack.Scene(TRI_V, TRI_F)
     o = np.array([[0.25, 0.25, 2.0]] * 4)
     d = np.array([[0, 0, -1.0], [0, 0, 0], [np.nan, 0, -1], [0, 0, -1]])
     hits = scene.intersect(o, d, tnear=np.array([0, 0, 0, 3.0]), tfar=np.array([9, 9, 9, 1.0]))
@@ -77,7 +77,7 @@ def test_sphere_distances():
     # A UV sphere of radius 1 lies between radii cos(pi/64) and 1: rays from a distance of 5
     # toward the centre hit at t in [4, 5 - cos(pi/64)].
     v, f = uv_sphere(64, 128)
-    scene = raypack.Scene(v, f)
+    scene = pyraypack.Scene(v, f)
     rng = np.random.default_rng(3)
     d = rng.normal(size=(5000, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
@@ -112,9 +112,9 @@ def layouts(origins: np.ndarray, directions: np.ndarray):
 
 def test_every_layout_gives_the_same_hits_as_the_rust_api():
     v, f = soup(20_000, 0.05, seed=1)
-    scene = raypack.Scene(v, f)
+    scene = pyraypack.Scene(v, f)
     o, d = random_rays(scene.bounds, 20_000, seed=2)
-    t, prim, u, v_, = raypack._raypack._intersect_stream(scene, o, d)
+    t, prim, u, v_, = pyraypack._raypack._intersect_stream(scene, o, d)
     assert (prim >= 0).sum() > 5000
     for name, lo, ld in layouts(o, d):
         for threads in (1, 2, None):
@@ -128,7 +128,7 @@ def test_every_layout_gives_the_same_hits_as_the_rust_api():
 
 def test_one_origin_for_all_rays():
     v, f = uv_sphere(16, 32)
-    scene = raypack.Scene(v, f)
+    scene = pyraypack.Scene(v, f)
     d = np.random.default_rng(0).normal(size=(3000, 3)).astype(np.float32)
     one = scene.intersect(np.zeros(3), d)
     many = scene.intersect(np.zeros((3000, 3)), d)
@@ -140,11 +140,11 @@ def test_one_origin_for_all_rays():
 
 
 def test_empty_rays_and_empty_scene():
-    scene = raypack.Scene(TRI_V, TRI_F)
+    scene = pyraypack.Scene(TRI_V, TRI_F)
     hits = scene.intersect(np.zeros((0, 3)), np.zeros((0, 3)))
     assert hits.t.shape == (0,) and hits.normal.shape == (0, 3)
     assert scene.occluded(np.zeros((0, 3)), np.zeros((0, 3))).shape == (0,)
-    empty = raypack.Scene(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int32))
+    empty = pyraypack.Scene(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int32))
     assert empty.num_triangles == 0 and np.isnan(empty.bounds).all()
     assert empty.intersect([0, 0, 0], [[1, 0, 0]]).prim.tolist() == [-1]
 
@@ -152,8 +152,8 @@ def test_empty_rays_and_empty_scene():
 def test_dropped_faces_are_counted_and_ids_still_index_the_faces_given():
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [np.nan, 0, 0], [2, 0, 0], [10, 0, 0], [11, 0, 0], [10, 1, 0]], float)
     f = np.array([[0, 1, 2], [0, 1, 3], [0, 1, 4], [5, 6, 7]])  # NaN corner, collinear, fine
-    with pytest.warns(raypack.SceneWarning, match=r"dropped 2 of 4 faces \(1 with NaN.*1 with zero area"):
-        scene = raypack.Scene(v, f)
+    with pytest.warns(pyraypack.SceneWarning, match=r"dropped 2 of 4 faces \(1 with NaN.*1 with zero area"):
+        scene = pyraypack.Scene(v, f)
     assert scene.report == {"triangles": 2, "spheres": 0, "dropped_non_finite": 1, "dropped_degenerate": 1, "dropped_spheres": 0}
     hits = scene.intersect(np.array([[0.2, 0.2, 1], [10.2, 0.2, 1]]), [0, 0, -1])
     assert hits.prim.tolist() == [0, 3]
@@ -166,7 +166,7 @@ def test_intersect_all_returns_every_layer_in_order():
     parts = [grid(4, z=z) for z in range(5)]
     v = np.vstack([p[0] for p in parts])
     f = np.vstack([p[1] + i * len(parts[0][0]) for i, p in enumerate(parts)])
-    scene = raypack.Scene(v, f)
+    scene = pyraypack.Scene(v, f)
     o = np.array([[0.13, 0.21, 10.0], [0.3, -0.4, 10.0], [5, 5, 10.0]])
     ray, prim, t, u, v_ = scene.intersect_all(o, [0, 0, -1])
     assert ray.tolist() == [0] * 5 + [1] * 5
@@ -181,10 +181,10 @@ def test_cs184_meshes_equal_the_rust_api():
     root = scenes_dir()
     for name in ["meshedit/beetle.dae", "meshedit/teapot.dae", "sky/CBbunny.dae", "sky/CBspheres.dae"]:
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore", raypack.SceneWarning)
-            scene = raypack.load(root / "cs184" / name)
-        for set_name, (o, d, tfar) in raypack._raypack._ray_sets(scene, 96, 72, 5).items():
-            t, prim, u, v = raypack._raypack._intersect_stream(scene, o, d)
+            warnings.simplefilter("ignore", pyraypack.SceneWarning)
+            scene = pyraypack.load(root / "cs184" / name)
+        for set_name, (o, d, tfar) in pyraypack._raypack._ray_sets(scene, 96, 72, 5).items():
+            t, prim, u, v = pyraypack._raypack._intersect_stream(scene, o, d)
             hits = scene.intersect(o.astype(np.float64), d)
             assert np.array_equal(hits.t, t) and np.array_equal(hits.prim, prim), (name, set_name)
             assert np.array_equal(hits.u, u) and np.array_equal(hits.v, v), (name, set_name)
@@ -201,12 +201,12 @@ def test_load_matches_arrays_and_the_bvh_cache(tmp_path):
     body = "".join(f"{x:.9g} {y:.9g} {z:.9g}\n" for x, y, z in v.astype(np.float32)) + "".join(f"3 {a} {b} {c}\n" for a, b, c in f)
     ply.write_text(header + body)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", raypack.SceneWarning)
-        loaded = raypack.load(ply, bvh_cache=tmp_path / "cache")
-        again = raypack.load(str(ply), bvh_cache=tmp_path / "cache", quality="medium")
+        warnings.simplefilter("ignore", pyraypack.SceneWarning)
+        loaded = pyraypack.load(ply, bvh_cache=tmp_path / "cache")
+        again = pyraypack.load(str(ply), bvh_cache=tmp_path / "cache", quality="medium")
     assert not loaded.bvh_cache_loaded and again.bvh_cache_loaded and loaded.bvh_cache_file == again.bvh_cache_file
     assert loaded.faces.tolist() == f.tolist() and np.array_equal(loaded.vertices, v.astype(np.float32))
-    scene = raypack.Scene(v, f)
+    scene = pyraypack.Scene(v, f)
     o, d = random_rays(scene.bounds, 5000, seed=4)
     for other in (loaded, again):
         assert np.array_equal(scene.intersect(o, d).t, other.intersect(o, d).t)
@@ -216,9 +216,9 @@ def test_load_matches_arrays_and_the_bvh_cache(tmp_path):
 def test_build_options(quality):
     v, f = soup(3000, 0.1, seed=quality.__len__())
     o, d = random_rays([[-1, -1, -1], [1, 1, 1]], 4000, seed=5)
-    ref = raypack.Scene(v, f)
+    ref = pyraypack.Scene(v, f)
     for watertight in (False, True):
-        scene = raypack.Scene(v, f, quality=quality, watertight=watertight, threads=1)
+        scene = pyraypack.Scene(v, f, quality=quality, watertight=watertight, threads=1)
         hits = scene.intersect(o, d)
         # The same closest hits whatever the tree; the triangle test may differ in the last
         # bits of t, never in which surface is hit first (no shared edges in a soup).

@@ -1,5 +1,5 @@
-"""raypack.dask: renders split over a Dask cluster (2 worker processes) and on the local
-scheduler equal raypack.render bit for bit; ray batches in chunks equal Scene.intersect; the
+"""pyraypack.dask: renders split over a Dask cluster (2 worker processes) and on the local
+scheduler equal pyraypack.render bit for bit; ray batches in chunks equal Scene.intersect; the
 scene goes to each worker once and no worker builds its BVH."""
 
 from __future__ import annotations
@@ -9,23 +9,23 @@ import pickle
 import numpy as np
 import pytest
 
-import raypack
+import pyraypack
 from conftest import need, random_rays, scenes_dir, uv_sphere
 
 need("dask")
 distributed = need("distributed")
-import raypack.dask  # noqa: E402
+import pyraypack.dask  # noqa: E402
 
 
 # First, before the cluster's client exists: Dask's local scheduler.
 def test_local_scheduler_gives_the_same():
     v, f = uv_sphere(16, 32)
-    scene = raypack.Scene(v, f)
+    scene = pyraypack.Scene(v, f)
     settings = dict(spp=2, max_depth=2, seed=1)
-    want = raypack.render(scene, width=40, height=30, **settings)
-    assert np.array_equal(raypack.dask.render(scene, 40, 30, tiles=7, **settings), want)
+    want = pyraypack.render(scene, width=40, height=30, **settings)
+    assert np.array_equal(pyraypack.dask.render(scene, 40, 30, tiles=7, **settings), want)
     origins, directions = random_rays(scene.bounds, 5000, seed=2)
-    hits = raypack.dask.intersect(scene, origins, directions, tnear=0.5, chunk_rays=999)
+    hits = pyraypack.dask.intersect(scene, origins, directions, tnear=0.5, chunk_rays=999)
     assert hits.t.numblocks == (6,)
     for a, b in zip(hits, scene.intersect(origins, directions, 0.5)):
         assert np.array_equal(a.compute(), b)
@@ -48,33 +48,33 @@ SETTINGS = dict(spp=4, max_depth=5, light_samples=1, seed=3)
 
 
 def test_cluster_render_of_cbbunny_in_4_tiles_equals_render(client):
-    want = raypack.render(bunny(), width=96, height=72, **SETTINGS)
-    got = raypack.dask.render(bunny(), 96, 72, tiles=4, **SETTINGS)
+    want = pyraypack.render(bunny(), width=96, height=72, **SETTINGS)
+    got = pyraypack.dask.render(bunny(), 96, 72, tiles=4, **SETTINGS)
     assert got.dtype == np.float32 and got.shape == (72, 96, 3)
     assert np.array_equal(got, want)
     # Both workers rendered, neither built a BVH (the scene came pickled, BVH included).
-    builds = client.run(raypack._raypack._bvh_builds)
+    builds = client.run(pyraypack._raypack._bvh_builds)
     assert len(builds) == 2 and all(n == 0 for n in builds.values()), builds
 
 
 def test_cluster_intersect_of_2m_rays_in_8_chunks_equals_intersect(client):
     v, f = uv_sphere(64, 128)
-    scene = raypack.Scene(v, f)
+    scene = pyraypack.Scene(v, f)
     origins, directions = random_rays(scene.bounds, 2_000_000, seed=1)
     want = scene.intersect(origins, directions)
-    hits = raypack.dask.intersect(scene, origins, directions, chunk_rays=250_000)
+    hits = pyraypack.dask.intersect(scene, origins, directions, chunk_rays=250_000)
     assert hits.t.numblocks == (8,)
-    got = raypack.dask.DaskHits(*client.compute(list(hits), sync=True))
-    for name, a, b in zip(raypack.dask.DaskHits._fields, got, want):
+    got = pyraypack.dask.DaskHits(*client.compute(list(hits), sync=True))
+    for name, a, b in zip(pyraypack.dask.DaskHits._fields, got, want):
         assert np.array_equal(a, b), name
     assert got.hit.sum() > 100_000
     # The scene is on each worker once, however many calls used it.
-    raypack.dask.intersect(scene, origins[:1000], directions[:1000]).t.compute()
+    pyraypack.dask.intersect(scene, origins[:1000], directions[:1000]).t.compute()
     token = scene.__dask_tokenize__()
     assert token == pickle.loads(pickle.dumps(scene)).__dask_tokenize__()
 
     def copies(dask_worker):
-        return sum(isinstance(v, raypack.Scene) and v.__dask_tokenize__() == token for v in dask_worker.data.values())
+        return sum(isinstance(v, pyraypack.Scene) and v.__dask_tokenize__() == token for v in dask_worker.data.values())
 
     assert list(client.run(copies).values()) == [1, 1]
     # As dask arrays in (chunked differently), with per-ray tfar: the same.
@@ -82,19 +82,19 @@ def test_cluster_intersect_of_2m_rays_in_8_chunks_equals_intersect(client):
     origins, directions = origins[:200_000], directions[:200_000]
     o, d = da.from_array(origins, chunks=(50_000, 3)), da.from_array(directions, chunks=(30_000, 3))
     tfar = np.full(len(origins), 3.0, np.float32)
-    occ = raypack.dask.occluded(scene, o, d, tfar=da.from_array(tfar, chunks=40_000))
+    occ = pyraypack.dask.occluded(scene, o, d, tfar=da.from_array(tfar, chunks=40_000))
     assert occ.numblocks == (4,)
     assert np.array_equal(occ.compute(), scene.occluded(origins, directions, tfar=tfar))
 
 
 def test_bad_arguments_name_themselves():
     v, f = uv_sphere(8, 8)
-    scene = raypack.Scene(v, f)
+    scene = pyraypack.Scene(v, f)
     with pytest.raises(ValueError, match="origins: expected shape"):
-        raypack.dask.intersect(scene, np.zeros((4, 2)), np.zeros((4, 3)))
+        pyraypack.dask.intersect(scene, np.zeros((4, 2)), np.zeros((4, 3)))
     with pytest.raises(ValueError, match="tfar: expected"):
-        raypack.dask.intersect(scene, np.zeros((4, 3)), np.ones((4, 3)), tfar=np.ones(3))
+        pyraypack.dask.intersect(scene, np.zeros((4, 3)), np.ones((4, 3)), tfar=np.ones(3))
     with pytest.raises(ValueError, match="chunk_rays"):
-        raypack.dask.intersect(scene, np.zeros((4, 3)), np.ones((4, 3)), chunk_rays=0)
+        pyraypack.dask.intersect(scene, np.zeros((4, 3)), np.ones((4, 3)), chunk_rays=0)
     with pytest.raises(TypeError, match="scene: expected"):
-        raypack.dask.render(42, 8, 8)
+        pyraypack.dask.render(42, 8, 8)

@@ -13,7 +13,7 @@ import warnings
 import numpy as np
 import pytest
 
-import raypack
+import pyraypack
 from conftest import grid, need, random_rays, scenes_dir, soup, uv_sphere
 
 rtcore_scene = need("embreex.rtcore_scene")
@@ -75,7 +75,7 @@ def t_tolerance(vertices, faces, prim, o, d, t):
 
 def compare(name, vertices, faces, o, d, tfar, robust=False):
     """Counts (rays, edge cases) and asserts no mismatch."""
-    scene = raypack.Scene(vertices, faces)
+    scene = pyraypack.Scene(vertices, faces)
     hits = scene.intersect(o, d, tfar=tfar)
     t_e, prim_e = embree_hits(vertices, faces, o, d, tfar, robust)
     t_r, prim_r = hits.t, hits.prim
@@ -112,7 +112,7 @@ def compare(name, vertices, faces, o, d, tfar, robust=False):
 def ray_sets(scene, width, height, seed):
     """The benchmark's sets (camera, diffuse, shadow; from the scene file's camera, if any)
     and random rays through the bounds."""
-    sets = dict(raypack._raypack._ray_sets(scene, width, height, seed))
+    sets = dict(pyraypack._raypack._ray_sets(scene, width, height, seed))
     o, d = random_rays(scene.bounds, 20_000, seed)
     sets["random"] = (o, d, np.full(len(o), np.inf, np.float32))
     return sets
@@ -133,7 +133,7 @@ def generated():
 @pytest.mark.parametrize("name", list(generated()))
 def test_generated_meshes_agree_with_embree(name):
     v, f, robust = generated()[name]
-    for set_name, (o, d, tfar) in ray_sets(raypack.Scene(v, f), 320, 240, 7).items():
+    for set_name, (o, d, tfar) in ray_sets(pyraypack.Scene(v, f), 320, 240, 7).items():
         compare(f"{name} {set_name}", v, f, o, d, tfar, robust)
 
 
@@ -141,8 +141,8 @@ def test_generated_meshes_agree_with_embree(name):
 def test_cs184_meshes_agree_with_embree(name):
     path = scenes_dir() / "cs184" / name
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", raypack.SceneWarning)
-        loaded = raypack.load(path)
+        warnings.simplefilter("ignore", pyraypack.SceneWarning)
+        loaded = pyraypack.load(path)
     v, f = loaded.vertices, loaded.faces
     for set_name, (o, d, tfar) in ray_sets(loaded, 320, 240, 7).items():
         compare(f"{name} {set_name}", v, f, o, d, tfar)

@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-import raypack
+import pyraypack
 
 V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float32)
 F = np.array([[0, 1, 2]])
@@ -19,7 +19,7 @@ D = np.tile([0, 0, 1.0], (4, 1))
 
 @pytest.fixture(scope="module")
 def scene():
-    return raypack.Scene(V, F)
+    return pyraypack.Scene(V, F)
 
 
 @pytest.mark.parametrize(
@@ -41,7 +41,7 @@ def scene():
 )
 def test_bad_meshes(vertices, faces, error, message):
     with pytest.raises(error, match=message):
-        raypack.Scene(vertices, faces)
+        pyraypack.Scene(vertices, faces)
 
 
 @pytest.mark.parametrize(
@@ -54,7 +54,7 @@ def test_bad_meshes(vertices, faces, error, message):
 )
 def test_bad_build_options(kwargs, error, message):
     with pytest.raises(error, match=message):
-        raypack.Scene(V, F, **kwargs)
+        pyraypack.Scene(V, F, **kwargs)
 
 
 @pytest.mark.parametrize(
@@ -89,17 +89,17 @@ def test_bad_intersect_all_step(scene):
 
 def test_missing_and_malformed_files(tmp_path):
     with pytest.raises(FileNotFoundError, match=r"no/such/scene.obj"):
-        raypack.load(tmp_path / "no/such/scene.obj")
+        pyraypack.load(tmp_path / "no/such/scene.obj")
     bad = tmp_path / "bad.obj"
     bad.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n")
     with pytest.raises(ValueError, match=r"bad.obj:line 4"):
-        raypack.load(bad)
+        pyraypack.load(bad)
     other = tmp_path / "scene.stl"
     other.write_text("solid")
     with pytest.raises(ValueError, match=r"scene.stl: unsupported scene format \(expected .dae, .obj or .ply\)"):
-        raypack.load(other)
+        pyraypack.load(other)
     with pytest.raises(FileNotFoundError, match=r"missing.dae"):
-        raypack.render(tmp_path / "missing.dae")
+        pyraypack.render(tmp_path / "missing.dae")
 
 
 @pytest.mark.parametrize(
@@ -113,24 +113,24 @@ def test_missing_and_malformed_files(tmp_path):
 )
 def test_bad_render_settings(scene, kwargs, error, message):
     with pytest.raises(error, match=message):
-        raypack.render(scene, **kwargs)
+        pyraypack.render(scene, **kwargs)
 
 
 def test_render_needs_a_scene_or_a_path():
-    with pytest.raises(TypeError, match=r"scene: expected a raypack.Scene or a path to a scene file, got int"):
-        raypack.render(3)
+    with pytest.raises(TypeError, match=r"scene: expected a pyraypack.Scene or a path to a scene file, got int"):
+        pyraypack.render(3)
 
 
 def test_hostile_values_do_not_crash(scene):
     # NaN, Inf and huge values anywhere: rays miss, vertices are dropped, the process lives.
     code = """
-import numpy as np, raypack, warnings
+import numpy as np, pyraypack, warnings
 warnings.simplefilter("ignore")
 rng = np.random.default_rng(0)
 vals = np.array([np.nan, np.inf, -np.inf, 1e38, -1e38, 0.0, 1e-45, 3.0e38])
 v = rng.choice(vals, size=(300, 3)); v[::3] = rng.random((100, 3))
 f = rng.integers(0, 300, size=(500, 3))
-s = raypack.Scene(v, f)
+s = pyraypack.Scene(v, f)
 o = rng.choice(vals, size=(5000, 3)); d = rng.choice(vals, size=(5000, 3))
 # Negative tnear / tfar are a ValueError (test_bad_rays); NaN and Inf go through.
 h = s.intersect(o, d, tnear=np.abs(rng.choice(vals, 5000)), tfar=np.abs(rng.choice(vals, 5000)))

@@ -12,7 +12,7 @@ import sys
 import numpy as np
 import pytest
 
-import raypack
+import pyraypack
 
 V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float32)
 F = np.array([[0, 1, 2]])
@@ -27,18 +27,18 @@ def test_sizes_that_cannot_fit_are_memory_errors_not_aborts():
     # Under an 8 GiB address-space limit the answer is the same on every machine; before, the
     # render aborted the interpreter (SIGABRT) after allocating what it could.
     code = """
-import resource, numpy as np, raypack
+import resource, numpy as np, pyraypack
 resource.setrlimit(resource.RLIMIT_AS, (8 << 30, 8 << 30))
-s = raypack.Scene(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]]))
-for call in (lambda: raypack.render(s, width=32768, height=32768),
-             lambda: raypack._raypack._ray_sets(s, 32768, 32768)):
+s = pyraypack.Scene(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]]))
+for call in (lambda: pyraypack.render(s, width=32768, height=32768),
+             lambda: pyraypack._raypack._ray_sets(s, 32768, 32768)):
     try:
         call()
         print("no error")
     except MemoryError as e:
         print("MemoryError:", e)
 try:
-    raypack._raypack._ray_sets(s, 65536, 65536)
+    pyraypack._raypack._ray_sets(s, 65536, 65536)
 except ValueError as e:
     print("ValueError:", e)
 """
@@ -56,8 +56,8 @@ except ValueError as e:
 def test_arrays_freed_by_another_thread_during_a_query_do_not_crash(attack):
     # Before, either attack freed the memory the kernels were reading: SIGSEGV.
     code = f"""
-import threading, time, numpy as np, raypack
-s = raypack.Scene(np.array([[-9, -9, 0], [9, -9, 0], [0, 9, 0]]), np.array([[0, 1, 2]]))
+import threading, time, numpy as np, pyraypack
+s = pyraypack.Scene(np.array([[-9, -9, 0], [9, -9, 0], [0, 9, 0]]), np.array([[0, 1, 2]]))
 n = 2_000_000
 for query in ("intersect", "occluded", "intersect_all"):
     o = np.zeros((n, 3), np.float32); o[:, 2] = 5.0
@@ -86,13 +86,13 @@ for query in ("intersect", "occluded", "intersect_all"):
 def test_thread_counts_are_capped():
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     too_many = 8 * cpus + 1
-    s = raypack.Scene(V, F)
+    s = pyraypack.Scene(V, F)
     message = rf"threads: expected None \(all cores\) or 1 to {8 * cpus} threads \(8 per logical CPU; this machine has {cpus}\), got {too_many}"
     for call in (
-        lambda: raypack.Scene(V, F, threads=too_many),
+        lambda: pyraypack.Scene(V, F, threads=too_many),
         lambda: s.intersect(V, V, threads=too_many),
         lambda: s.occluded(V, V, threads=too_many),
-        lambda: raypack.render(s, width=4, height=4, threads=too_many),
+        lambda: pyraypack.render(s, width=4, height=4, threads=too_many),
     ):
         with pytest.raises(ValueError, match=message):
             call()
@@ -103,9 +103,9 @@ def test_thread_counts_are_capped():
 def test_raypack_isa_is_checked_as_the_cli_checks_it(value):
     # Before, the module ignored a garbage (or non-UTF-8) RAYPACK_ISA silently.
     code = """
-import numpy as np, raypack
+import numpy as np, pyraypack
 try:
-    raypack.Scene(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]]))
+    pyraypack.Scene(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]]))
     print("accepted")
 except ValueError as e:
     print(e)
@@ -120,15 +120,15 @@ except ValueError as e:
 
 
 def test_build_arguments_that_would_be_ignored_or_misread_are_errors(tmp_path, monkeypatch):
-    s = raypack.Scene(V, F)
+    s = pyraypack.Scene(V, F)
     # Before, "ultra" was accepted and ignored, as was a quality for a scene built already.
     with pytest.raises(ValueError, match=r"quality: expected 'fast', 'medium' or 'high', got 'ultra'"):
-        raypack.render(s, width=4, height=4, quality="ultra")
+        pyraypack.render(s, width=4, height=4, quality="ultra")
     with pytest.raises(ValueError, match=r"quality, watertight, bvh_cache: they build a scene from a file"):
-        raypack.render(s, width=4, height=4, quality="high")
+        pyraypack.render(s, width=4, height=4, quality="high")
     # Before, bvh_cache="" wrote the cache file into the current directory.
     monkeypatch.chdir(tmp_path)
-    for call in (lambda: raypack.Scene(V, F, bvh_cache=""), lambda: raypack.load(tmp_path / "x.obj", bvh_cache="")):
+    for call in (lambda: pyraypack.Scene(V, F, bvh_cache=""), lambda: pyraypack.load(tmp_path / "x.obj", bvh_cache="")):
         with pytest.raises(ValueError, match=r"bvh_cache: expected a directory, got an empty path"):
             call()
     assert list(tmp_path.iterdir()) == []

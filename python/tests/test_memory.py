@@ -10,7 +10,7 @@ import sys
 import pytest
 
 SCRIPT = r"""
-import numpy as np, raypack, sys
+import numpy as np, pyraypack, sys
 from conftest import uv_sphere
 
 def peak():
@@ -23,7 +23,7 @@ def reset_peak():
         f.write("5")
 
 k = int(sys.argv[1])
-scene = raypack.Scene(*uv_sphere(32, 64))
+scene = pyraypack.Scene(*uv_sphere(32, 64))
 rng = np.random.default_rng(0)
 o = (rng.random((k, 3), dtype=np.float32) - 0.5) * 4
 d = rng.random((k, 3), dtype=np.float32) - 0.5

@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 import pytest
 
-import raypack
+import pyraypack
 from conftest import random_rays, scenes_dir, uv_sphere
 
 
@@ -26,13 +26,13 @@ def test_pickled_scenes_trace_the_same_without_a_build():
     # A dropped face: the face map travels with the scene.
     f = np.vstack([f, [[0, 0, 1]]])
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", raypack.SceneWarning)
-        scene = raypack.Scene(v, f, quality="high", watertight=True)
+        warnings.simplefilter("ignore", pyraypack.SceneWarning)
+        scene = pyraypack.Scene(v, f, quality="high", watertight=True)
     data = pickle.dumps(scene)
-    builds = raypack._raypack._bvh_builds()
+    builds = pyraypack._raypack._bvh_builds()
     back = pickle.loads(data)
-    assert raypack._raypack._bvh_builds() == builds, "unpickling built a BVH"
-    assert isinstance(back, raypack.Scene)
+    assert pyraypack._raypack._bvh_builds() == builds, "unpickling built a BVH"
+    assert isinstance(back, pyraypack.Scene)
     assert back.report == scene.report
     origins, directions = random_rays(scene.bounds, 20000, seed=3)
     hits = same_hits(scene, back, origins, directions)
@@ -43,16 +43,16 @@ def test_pickled_scenes_trace_the_same_without_a_build():
 
 def test_pickled_scene_files_render_the_same():
     path = scenes_dir() / "cs184" / "sky" / "CBspheres.dae"
-    scene = raypack.load(path)
+    scene = pyraypack.load(path)
     back = pickle.loads(pickle.dumps(scene))
     settings = dict(spp=2, max_depth=3, width=40, height=30, seed=5)
-    assert np.array_equal(raypack.render(back, **settings), raypack.render(scene, **settings))
+    assert np.array_equal(pyraypack.render(back, **settings), pyraypack.render(scene, **settings))
     assert back.num_spheres == scene.num_spheres > 0
 
 
 def test_damaged_pickles_are_refused():
     v, f = uv_sphere(8, 16)
-    scene = raypack.Scene(v, f)
+    scene = pyraypack.Scene(v, f)
     function, (snapshot, prim_map, report) = scene.__reduce__()
     for at in (0, 100, len(snapshot) // 2, len(snapshot) - 1):
         bad = bytearray(snapshot)

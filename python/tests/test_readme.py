@@ -29,7 +29,7 @@ def test_readme_example(index, monkeypatch):
     if "trimesh" in source:
         pytest.importorskip("trimesh", reason="SKIPPED: the README's trimesh example needs trimesh (pip install trimesh)")
     if "dask" in source:
-        pytest.importorskip("distributed", reason="SKIPPED: the README's Dask example needs dask (pip install raypack[dask])")
+        pytest.importorskip("distributed", reason="SKIPPED: the README's Dask example needs dask (pip install pyraypack[dask])")
     # The examples name the repository's files relative to its root.
     monkeypatch.chdir(REPO)
     test = doctest.DocTestParser().get_doctest(source, {}, f"README.md python block {index}", "README.md", 0)

@@ -1,4 +1,4 @@
-"""raypack.render equals the CLI's image for the same settings and seed, whatever the thread
+"""pyraypack.render equals the CLI's image for the same settings and seed, whatever the thread
 count; a Scene built from arrays renders as the same mesh loaded from a file."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 import pytest
 
-import raypack
+import pyraypack
 from conftest import cli, need, scenes_dir, uv_sphere
 
 SETTINGS = dict(spp=4, max_depth=3, light_samples=2, width=64, height=48, seed=11)
@@ -33,8 +33,8 @@ def test_render_equals_the_cli(tmp_path, name, integrator):
     path = scenes_dir() / "cs184" / name
     want = cli_render(path, tmp_path / "cli.exr", "--integrator", integrator, "-t", "2")
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", raypack.SceneWarning)
-        image = raypack.render(path, integrator=integrator, threads=1, **SETTINGS)
+        warnings.simplefilter("ignore", pyraypack.SceneWarning)
+        image = pyraypack.render(path, integrator=integrator, threads=1, **SETTINGS)
     assert image.dtype == np.float32 and image.shape == (48, 64, 3)
     assert image.max() > 0
     assert np.array_equal(image, want)
@@ -42,11 +42,11 @@ def test_render_equals_the_cli(tmp_path, name, integrator):
 
 def test_the_built_in_sizes_and_threads():
     v, f = uv_sphere(16, 32)
-    scene = raypack.Scene(v, f)
-    one = raypack.render(scene, threads=1, **SETTINGS)
-    two = raypack.render(scene, threads=2, **SETTINGS)
+    scene = pyraypack.Scene(v, f)
+    one = pyraypack.render(scene, threads=1, **SETTINGS)
+    two = pyraypack.render(scene, threads=2, **SETTINGS)
     assert np.array_equal(one, two)
-    other_seed = raypack.render(scene, threads=2, **{**SETTINGS, "seed": 12})
+    other_seed = pyraypack.render(scene, threads=2, **{**SETTINGS, "seed": 12})
     assert not np.array_equal(one, other_seed)
 
 
@@ -57,9 +57,9 @@ def test_scene_from_arrays_renders_as_the_same_ply(tmp_path):
     header = f"ply\nformat ascii 1.0\nelement vertex {len(v)}\nproperty float x\nproperty float y\nproperty float z\nelement face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n"
     ply.write_text(header + "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in v.tolist()) + "".join(f"3 {a} {b} {c}\n" for a, b, c in f))
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", raypack.SceneWarning)
-        from_file = raypack.render(ply, **SETTINGS)
-    from_arrays = raypack.render(raypack.Scene(v, f), **SETTINGS)
+        warnings.simplefilter("ignore", pyraypack.SceneWarning)
+        from_file = pyraypack.render(ply, **SETTINGS)
+    from_arrays = pyraypack.render(pyraypack.Scene(v, f), **SETTINGS)
     assert from_file.max() > 0 and np.array_equal(from_file, from_arrays)
     assert np.array_equal(from_file, cli_render(ply, tmp_path / "ball.exr"))
 
@@ -68,24 +68,24 @@ def test_windows_are_the_whole_image_s_pixels():
     """Any window's pixels are the whole image's, bit for bit: crop windows, pixel bounds and
     the parts of ``tile_bounds`` (which tile the image), at one and two threads."""
     v, f = uv_sphere(12, 24)
-    scene = raypack.Scene(v, f)
-    whole = raypack.render(scene, threads=2, **SETTINGS)
+    scene = pyraypack.Scene(v, f)
+    whole = pyraypack.render(scene, threads=2, **SETTINGS)
     w, h = SETTINGS["width"], SETTINGS["height"]
     for n in (1, 2, 7):
-        parts = raypack.tile_bounds(n, w, h)
+        parts = pyraypack.tile_bounds(n, w, h)
         assert len(parts) == n
         image = np.full_like(whole, np.nan)
         for i, (x0, x1, y0, y1) in enumerate(parts):
             assert np.isnan(image[y0:y1, x0:x1]).all(), "the parts overlap"
-            image[y0:y1, x0:x1] = raypack.render(scene, pixel_bounds=(x0, x1, y0, y1), threads=1 + i % 2, **SETTINGS)
+            image[y0:y1, x0:x1] = pyraypack.render(scene, pixel_bounds=(x0, x1, y0, y1), threads=1 + i % 2, **SETTINGS)
         assert np.array_equal(image, whole)
-    crop = raypack.render(scene, crop_window=(0.25, 0.75, 0.5, 1.0), **SETTINGS)
+    crop = pyraypack.render(scene, crop_window=(0.25, 0.75, 0.5, 1.0), **SETTINGS)
     assert np.array_equal(crop, whole[h // 2 :, w // 4 : 3 * w // 4])
 
 
 def test_bad_windows_name_the_argument():
     v, f = uv_sphere(8, 8)
-    scene = raypack.Scene(v, f)
+    scene = pyraypack.Scene(v, f)
     for kwargs, says in [
         (dict(crop_window=(0.5, 0.5, 0.0, 1.0)), "crop_window"),
         (dict(crop_window=(0.0, 2.0, 0.0, 1.0)), "crop_window"),
@@ -94,6 +94,6 @@ def test_bad_windows_name_the_argument():
         (dict(pixel_bounds=(0, 1, 0, 1), crop_window=(0.0, 1.0, 0.0, 1.0)), "not both"),
     ]:
         with pytest.raises(ValueError, match=says):
-            raypack.render(scene, **kwargs, **SETTINGS)
+            pyraypack.render(scene, **kwargs, **SETTINGS)
     with pytest.raises(ValueError, match="cannot be split into 7 parts"):
-        raypack.tile_bounds(7, 6, 6)
+        pyraypack.tile_bounds(7, 6, 6)

@@ -10,12 +10,12 @@ from conftest import REPO, need
 
 def test_stubs_match_the_runtime_module():
     need("mypy")
-    done = subprocess.run([sys.executable, "-m", "mypy.stubtest", "raypack._raypack"], capture_output=True, text=True, cwd="/")
+    done = subprocess.run([sys.executable, "-m", "mypy.stubtest", "pyraypack._raypack"], capture_output=True, text=True, cwd="/")
     assert done.returncode == 0, done.stdout + done.stderr
 
 
 def test_package_type_checks():
     need("mypy")
-    sources = [str(REPO / "python" / "raypack" / name) for name in ("__init__.py", "trimesh.py", "dask.py")]
+    sources = [str(REPO / "python" / "pyraypack" / name) for name in ("__init__.py", "trimesh.py", "dask.py")]
     done = subprocess.run([sys.executable, "-m", "mypy", "--ignore-missing-imports", *sources], capture_output=True, text=True, cwd="/")
     assert done.returncode == 0, done.stdout + done.stderr

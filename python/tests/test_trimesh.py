@@ -1,4 +1,4 @@
-"""raypack.trimesh.RayMeshIntersector against trimesh's own intersectors on trimesh's
+"""pyraypack.trimesh.RayMeshIntersector against trimesh's own intersectors on trimesh's
 primitives: the same answers, except for rays through edges and vertices (counted)."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pytest
 from conftest import need, random_rays
 
 trimesh = need("trimesh")
-import raypack.trimesh  # noqa: E402  (needs trimesh)
+import pyraypack.trimesh  # noqa: E402  (needs trimesh)
 
 
 def primitives():
@@ -67,7 +67,7 @@ def rays_for(mesh, n=20_000, seed=0):
 @pytest.mark.parametrize("name", list(primitives()))
 def test_first_and_any_hits_match(name):
     mesh = primitives()[name]
-    ours = raypack.trimesh.RayMeshIntersector(mesh)
+    ours = pyraypack.trimesh.RayMeshIntersector(mesh)
     o_all, d_all = rays_for(mesh)
     first_all = ours.intersects_first(o_all, d_all)
     assert first_all.dtype == np.int64 and first_all.shape == (len(o_all),)
@@ -99,7 +99,7 @@ def test_first_and_any_hits_match(name):
 @pytest.mark.parametrize("name", list(primitives()))
 def test_multiple_hits_and_locations_match(name):
     mesh = primitives()[name]
-    ours = raypack.trimesh.RayMeshIntersector(mesh)
+    ours = pyraypack.trimesh.RayMeshIntersector(mesh)
     o, d = rays_for(mesh, 5000, seed=1)
     tri, ray, loc = ours.intersects_id(o, d, multiple_hits=True, return_locations=True)
     assert tri.dtype == np.int64 and ray.dtype == np.int64 and loc.shape == (len(tri), 3)
@@ -144,7 +144,7 @@ def test_trimesh_readme_example_and_the_one_line_swap():
     ref_locations, ref_index_ray, ref_index_tri = mesh.ray.intersects_location(
         ray_origins=[[0, 0, -5], [2, 2, -10]], ray_directions=[[0, 0, 1], [0, 0, 1]]
     )
-    mesh.ray = raypack.trimesh.RayMeshIntersector(mesh)
+    mesh.ray = pyraypack.trimesh.RayMeshIntersector(mesh)
     locations, index_ray, index_tri = mesh.ray.intersects_location(
         ray_origins=[[0, 0, -5], [2, 2, -10]], ray_directions=[[0, 0, 1], [0, 0, 1]]
     )
@@ -162,7 +162,7 @@ def test_trimesh_readme_example_and_the_one_line_swap():
 def test_contains_points_matches(name):
     mesh = primitives()[name]
     pts = np.random.default_rng(3).random((5000, 3)) * (mesh.extents * 1.2) + mesh.bounds[0] - 0.1 * mesh.extents
-    ours = raypack.trimesh.RayMeshIntersector(mesh).contains_points(pts)
+    ours = pyraypack.trimesh.RayMeshIntersector(mesh).contains_points(pts)
     for ref_name, Ref in references().items():
         n = min(RAYS[ref_name], len(pts))
         ref = Ref(mesh).contains_points(pts[:n])
@@ -171,7 +171,7 @@ def test_contains_points_matches(name):
 
 def test_scene_follows_the_mesh_and_copies():
     mesh = trimesh.creation.box()
-    ray = raypack.trimesh.RayMeshIntersector(mesh, threads=1, quality="high")
+    ray = pyraypack.trimesh.RayMeshIntersector(mesh, threads=1, quality="high")
     o, d = np.array([[0, 0, 5.0]]), np.array([[0, 0, -1.0]])
     assert ray.intersects_location(o, d, multiple_hits=False)[0].tolist() == [[0, 0, 0.5]]
     mesh.apply_translation([0, 0, 1])
@@ -185,8 +185,8 @@ def test_degenerate_faces_keep_their_ids():
     faces = np.vstack([[[0, 0, 1]], mesh.faces, [[2, 2, 2]]])
     odd = trimesh.Trimesh(mesh.vertices, faces, process=False)
     o, d = rays_for(odd, 2000, seed=4)
-    ours = raypack.trimesh.RayMeshIntersector(odd).intersects_first(o, d)
-    plain = raypack.trimesh.RayMeshIntersector(mesh).intersects_first(o, d)
+    ours = pyraypack.trimesh.RayMeshIntersector(odd).intersects_first(o, d)
+    plain = pyraypack.trimesh.RayMeshIntersector(mesh).intersects_first(o, d)
     assert np.array_equal(ours, np.where(plain >= 0, plain + 1, -1))
 
 
@@ -221,7 +221,7 @@ def test_rays_from_a_face_count_it_as_trimeshs_intersectors_do():
     unit box from (0.1, 0.3, 0.5) on its top face, down and up, and rays from points of every
     face, out, in and oblique)."""
     mesh = trimesh.creation.box()
-    ours = raypack.trimesh.RayMeshIntersector(mesh)
+    ours = pyraypack.trimesh.RayMeshIntersector(mesh)
     o, d, n = box_face_rays(mesh)
     o = np.vstack([[[0.1, 0.3, 0.5]] * 2, o])
     d = np.vstack([[[0, 0, -1.0], [0, 0, 1.0]], d])
@@ -250,7 +250,7 @@ def test_multiple_hits_from_a_surface_vertex_at_every_scale(scale):
     mesh = trimesh.creation.box().subdivide().subdivide()
     mesh.apply_scale(scale)
     o, d = np.array([[0.0, 0.0, scale / 2]]), np.array([[0.0, 0.0, -1.0]])
-    tri, _, loc = raypack.trimesh.RayMeshIntersector(mesh, scale_to_box=False).intersects_id(
+    tri, _, loc = pyraypack.trimesh.RayMeshIntersector(mesh, scale_to_box=False).intersects_id(
         o, d, multiple_hits=True, return_locations=True
     )
     assert np.allclose(loc, [[0, 0, scale / 2], [0, 0, -scale / 2]], rtol=0, atol=1e-9 * scale)

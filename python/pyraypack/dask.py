@@ -1,15 +1,15 @@
 """raypack on Dask: renders split into parts and ray batches split into chunks, on a
 ``dask.distributed`` cluster when a client is active (a ``LocalCluster`` on one machine,
 ``dask-jobqueue``'s ``SLURMCluster`` or ``PBSCluster`` on a batch system, ``dask-kubernetes``)
-and on Dask's local scheduler otherwise. Install with ``pip install raypack[dask]``.
+and on Dask's local scheduler otherwise. Install with ``pip install pyraypack[dask]``.
 
-    >>> import raypack, raypack.dask
-    >>> image = raypack.dask.render("CBbunny.dae", 480, 360, spp=64, max_depth=5, tiles=8)
-    >>> hits = raypack.dask.intersect(scene, origins, directions)   # dask arrays
+    >>> import pyraypack, pyraypack.dask
+    >>> image = pyraypack.dask.render("CBbunny.dae", 480, 360, spp=64, max_depth=5, tiles=8)
+    >>> hits = pyraypack.dask.intersect(scene, origins, directions)   # dask arrays
     >>> t = hits.t.compute()
 
 The results do not depend on how the work is split: a render's parts are the pixels of
-``raypack.render(..., pixel_bounds=part)``, each bit for bit its value in the whole image, and
+``pyraypack.render(..., pixel_bounds=part)``, each bit for bit its value in the whole image, and
 a chunk's hits are ``Scene.intersect``'s for its rays.
 
 The scene goes to each worker once: on a cluster it is scattered to every worker
@@ -36,7 +36,7 @@ def _modules() -> tuple[Any, Any]:
         import dask
         import dask.array
     except ImportError as e:  # pragma: no cover - exercised without dask only
-        raise ImportError("raypack.dask needs Dask: pip install raypack[dask] (or dask[array,distributed])") from e
+        raise ImportError("pyraypack.dask needs Dask: pip install pyraypack[dask] (or dask[array,distributed])") from e
     return dask, dask.array
 
 
@@ -99,7 +99,7 @@ def _load(scene: Any, quality: _Quality, watertight: bool, bvh_cache: Any) -> _r
         return scene
     if isinstance(scene, (str, os.PathLike)):
         return _raypack.load(scene, quality=quality, watertight=watertight, bvh_cache=bvh_cache)
-    raise TypeError(f"scene: expected a raypack.Scene or a path to a scene file, got {type(scene).__name__}")
+    raise TypeError(f"scene: expected a pyraypack.Scene or a path to a scene file, got {type(scene).__name__}")
 
 
 def _render_part(scene: _raypack.Scene, bounds: tuple[int, int, int, int], settings: dict[str, Any]) -> np.ndarray:
@@ -124,9 +124,9 @@ def render(
     bvh_cache: Any = None,
     client: Any = None,
 ) -> np.ndarray:
-    """Renders ``scene`` (a ``raypack.Scene`` or a scene file's path) in ``tiles`` parts, one
+    """Renders ``scene`` (a ``pyraypack.Scene`` or a scene file's path) in ``tiles`` parts, one
     task each, and returns the whole image: float32 ``(height, width, 3)``, bit for bit
-    ``raypack.render``'s with the same settings. The parts are ``raypack.tile_bounds(tiles,
+    ``pyraypack.render``'s with the same settings. The parts are ``pyraypack.tile_bounds(tiles,
     width, height)`` (those of ``raypack render --tile I/N``); by default two per worker
     thread of the cluster, or one per core on the local scheduler. ``client`` defaults to the
     active ``dask.distributed`` client."""

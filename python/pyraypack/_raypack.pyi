@@ -1,4 +1,4 @@
-"""Type stubs of the native module ``raypack._raypack`` (re-exported by ``raypack``)."""
+"""Type stubs of the native module ``pyraypack._raypack`` (re-exported by ``pyraypack``)."""
 
 from collections.abc import Iterator
 import pathlib
@@ -245,4 +245,4 @@ def _plane_points(
     origins: npt.NDArray[np.float64],
     directions: npt.NDArray[np.float64],
 ) -> npt.NDArray[np.float64]:
-    """float64 hit locations for ``raypack.trimesh``: where each ray meets its triangle's plane."""
+    """float64 hit locations for ``pyraypack.trimesh``: where each ray meets its triangle's plane."""

@@ -1,8 +1,8 @@
 """A drop-in for trimesh's ray queries, traced by raypack.
 
-    >>> import trimesh, raypack.trimesh
+    >>> import trimesh, pyraypack.trimesh
     >>> mesh = trimesh.creation.icosphere()
-    >>> mesh.ray = raypack.trimesh.RayMeshIntersector(mesh)
+    >>> mesh.ray = pyraypack.trimesh.RayMeshIntersector(mesh)
     >>> locations, index_ray, index_tri = mesh.ray.intersects_location(
     ...     ray_origins=[[0, 0, -5], [2, 2, -10]], ray_directions=[[0, 0, 1], [0, 0, 1]])
     >>> index_ray
@@ -66,7 +66,7 @@ class RayMeshIntersector:
       the origin when it lies far from it (as trimesh does, for float32 precision), but does
       not scale it: scaling changes no float32 hit.
     quality, watertight, threads
-      The build options of ``raypack.Scene``; ``threads`` also applies to every query.
+      The build options of ``pyraypack.Scene``; ``threads`` also applies to every query.
     """
 
     def __init__(
