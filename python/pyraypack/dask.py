@@ -12,9 +12,12 @@ The results do not depend on how the work is split: a render's parts are the pix
 ``pyraypack.render(..., pixel_bounds=part)``, each bit for bit its value in the whole image, and
 a chunk's hits are ``Scene.intersect``'s for its rays.
 
-The scene goes to each worker once: on a cluster it is scattered to every worker
-(``Client.scatter(..., broadcast=True)``) and the tasks refer to it; its pickle holds the BVH
-(``len(pickle.dumps(scene))`` bytes), so no worker builds it again. A scene given as a path is
+The scene goes to each worker once: on a cluster it is registered as a worker plugin
+(``Client.register_plugin``), which the scheduler sends to every worker, and to workers that
+join later, exactly once; tasks name it, so no task carries it and Dask's active memory manager
+cannot drop a worker's copy between calls (as it drops the extra replicas of scattered data).
+Its pickle holds the BVH (``len(pickle.dumps(scene))`` bytes), so no worker builds it again.
+The last few scenes stay registered for the client's session. A scene given as a path is
 loaded (and its BVH built, or read from ``bvh_cache``) once, on the client.
 """
 
@@ -68,26 +71,67 @@ def _task_threads() -> int | None:
     return int(n) if n else None
 
 
-# Scenes on clusters: (id of the client, the scene's token) -> the future of the scattered
-# scene, so that calls with the same scene send it only once. The last few are kept (each
-# holds its scene in the cluster's memory until the client closes).
-_SHARED: dict[tuple[int, str], Any] = {}
+try:
+    from distributed import WorkerPlugin as _WorkerPlugin
+except ImportError:  # pragma: no cover - dask without distributed: the local scheduler only
+    _WorkerPlugin = object  # type: ignore[misc, assignment]
+
+
+class _ScenePlugin(_WorkerPlugin):
+    """A scene every worker of a cluster holds, under the plugin's name."""
+
+    idempotent = True
+
+    def __init__(self, scene: _raypack.Scene) -> None:
+        self.scene = scene
+
+
+class _OnWorkers(NamedTuple):
+    """What a task gets for a scene held by the workers' plugin ``name``."""
+
+    name: str
+
+
+def _scene(scene: Any) -> _raypack.Scene:
+    """The scene a task traces: ``scene`` itself, or the one its worker's plugin holds."""
+    if isinstance(scene, _OnWorkers):
+        from distributed import get_worker
+
+        plugin: _ScenePlugin = get_worker().plugins[scene.name]  # type: ignore[assignment]
+        return plugin.scene
+    return scene
+
+
+# Scenes on clusters: (the client's id, the scene's token) -> the name of the worker plugin
+# that holds it, so that calls with the same scene send it only once. The last few are kept
+# (each holds its scene in every worker's memory, and the scheduler's, until unregistered or
+# the client closes).
+_SHARED: dict[tuple[str, str], str] = {}
 _SHARED_KEPT = 4
 
 
-def _share(scene: Any, client: Any) -> Any:
-    """What tasks take for the scene: on a cluster a future of it on every worker (sent once
-    each, and once per session), else the scene itself."""
+def _share(scene: _raypack.Scene, client: Any) -> Any:
+    """What tasks take for the scene: on a cluster the name of a worker plugin holding it on
+    every worker (sent once to each, and once per session), else the scene itself."""
     if client is None:
         return scene
-    key = (id(client), scene.__dask_tokenize__())
-    future = _SHARED.get(key)
-    if future is None or future.status != "finished":
-        future = client.scatter(scene, broadcast=True, hash=False)
-        _SHARED[key] = future
+    token = scene.__dask_tokenize__()
+    key = (str(client.id), token)
+    name = _SHARED.get(key)
+    if name is None:
+        name = f"pyraypack-scene-{token}"
+        plugin = _ScenePlugin(scene)
+        if hasattr(client, "register_plugin"):
+            client.register_plugin(plugin, name=name)
+        else:  # pragma: no cover - dask.distributed before 2023.9
+            client.register_worker_plugin(plugin, name=name)
+        _SHARED[key] = name
         while len(_SHARED) > _SHARED_KEPT:
-            del _SHARED[next(iter(_SHARED))]
-    return future
+            oldest = next(iter(_SHARED))
+            if oldest[0] == key[0]:
+                client.unregister_worker_plugin(_SHARED[oldest])
+            del _SHARED[oldest]
+    return _OnWorkers(name)
 
 
 _Quality = Literal["fast", "medium", "high"]
@@ -102,8 +146,8 @@ def _load(scene: Any, quality: _Quality, watertight: bool, bvh_cache: Any) -> _r
     raise TypeError(f"scene: expected a pyraypack.Scene or a path to a scene file, got {type(scene).__name__}")
 
 
-def _render_part(scene: _raypack.Scene, bounds: tuple[int, int, int, int], settings: dict[str, Any]) -> np.ndarray:
-    return _raypack.render(scene, pixel_bounds=bounds, threads=_task_threads(), **settings)
+def _render_part(scene: Any, bounds: tuple[int, int, int, int], settings: dict[str, Any]) -> np.ndarray:
+    return _raypack.render(_scene(scene), pixel_bounds=bounds, threads=_task_threads(), **settings)
 
 
 def render(
@@ -181,12 +225,12 @@ def _rays(rays: tuple[Any, ...]) -> tuple[Any, ...]:
     return rays[0] if len(rays) == 1 else rays
 
 
-def _intersect_chunk(scene: _raypack.Scene, *rays: Any) -> tuple[np.ndarray, ...]:
-    return tuple(scene.intersect(*_rays(rays), threads=_task_threads()))
+def _intersect_chunk(scene: Any, *rays: Any) -> tuple[np.ndarray, ...]:
+    return tuple(_scene(scene).intersect(*_rays(rays), threads=_task_threads()))
 
 
-def _occluded_chunk(scene: _raypack.Scene, *rays: Any) -> np.ndarray:
-    return scene.occluded(*_rays(rays), threads=_task_threads())
+def _occluded_chunk(scene: Any, *rays: Any) -> np.ndarray:
+    return _scene(scene).occluded(*_rays(rays), threads=_task_threads())
 
 
 def _chunks(
