@@ -29,7 +29,7 @@ fn main() -> ExitCode {
     let mesh = torus_knot(n_len, n_around, 2.0, 3.0, 0.45, 0.08);
     let bytes = write_ply(&mesh.positions, &mesh.indices, PlyFormat::BinaryLittleEndian);
     let path = PathBuf::from(out);
-    let result = raypack::io::output::write_file(&path, &bytes);
+    let result = raypack::fs::output::write_file(&path, &bytes);
     if let Err(e) = result {
         eprintln!("gen_mesh: {e}");
         return ExitCode::from(2);

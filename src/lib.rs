@@ -2,8 +2,9 @@
 //!
 //! A data-oriented SIMD ray tracer with a CS184-style path tracer on top.
 //!
-//! Layers, each depending only on the ones before it:
-//! [`math`] → [`ray`] / [`geometry`] → [`bvh`] → [`scene`] → [`render`] → [`io`].
+//! Layers, each depending only on the ones before it (the table in CONTRIBUTING.md, checked
+//! by `tests/layers.rs`): [`fs`] / [`system`] → [`math`] / [`ray`] / [`rng`] / [`simd`] →
+//! [`geometry`] → [`bvh`] → [`scene`] → [`render`], [`io`] and the other users of a scene.
 //!
 //! ```
 //! use raypack::{BuildOptions, Material, Ray, SceneBuilder, Vec3};
@@ -59,12 +60,12 @@
 pub mod bvh;
 #[cfg(feature = "embree")]
 pub mod embree;
+pub mod fs;
 pub mod generate;
 pub mod geometry;
 pub mod io;
 pub mod kernels;
 pub mod math;
-pub mod memory;
 pub mod methods;
 pub mod ray;
 pub mod raysets;
@@ -72,6 +73,9 @@ pub mod render;
 pub mod rng;
 pub mod scene;
 pub mod simd;
+pub mod system;
+#[cfg(test)]
+mod testing;
 
 pub use bvh::{BuildOptions, BuildQuality, Bvh8Node, BvhStats, SplitMethod, TraversalCounts};
 pub use math::{Aabb, Mat3, Mat4, Vec3};

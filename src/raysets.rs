@@ -24,6 +24,11 @@ use crate::scene::{Camera, Scene};
 /// Side of the square pixel tiles that primary rays are ordered in.
 pub const TILE: usize = 4;
 
+/// Bytes per primary ray that `raypack bench` holds at once: the three ray sets (primary,
+/// diffuse bounces, shadow rays), the reference hits they are made from, and the reference
+/// and timed outputs. With [`crate::system::check_fits`], it refuses a ray set that cannot fit.
+pub const BENCH_BYTES_PER_PIXEL: u64 = (3 * std::mem::size_of::<Ray>() + 3 * std::mem::size_of::<Hit>()) as u64;
+
 /// Which of the standard sets a [`RaySet`] is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum RaySetKind {

@@ -187,7 +187,7 @@ fn links_planted_at_temporary_names_are_never_followed() {
     let film = raypack::render::Film::new(4, 3);
     film.write(&out.join("a.png"), raypack::render::Encoding::Srgb).unwrap();
     film.write(&out.join("a.exr"), raypack::render::Encoding::Srgb).unwrap();
-    raypack::io::output::write_file(&out.join("b.json"), b"{}\n").unwrap();
+    raypack::fs::output::write_file(&out.join("b.json"), b"{}\n").unwrap();
     let (_, _, report) = b.commit_cached(&opts, &cache);
     assert!(report.write_error.is_none(), "{report:?}");
     assert!(std::fs::read(&victim).unwrap() == b"precious", "a planted link was followed");

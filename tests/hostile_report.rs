@@ -133,7 +133,7 @@ fn report_and_rays_inputs_go_through_the_guarded_reader() {
     // A bench JSON over the size limit is refused before it is parsed.
     let big = d.join("big.json");
     let f = std::fs::File::create(&big).unwrap();
-    f.set_len(raypack::io::input::MAX_BENCH_JSON_BYTES + 1).unwrap();
+    f.set_len(raypack::fs::input::MAX_BENCH_JSON_BYTES + 1).unwrap();
     expect(&["report", s(&big), "--out", s(&out)], 2, "more than the 67108864-byte limit for bench JSON files");
 }
 

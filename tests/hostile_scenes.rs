@@ -243,7 +243,7 @@ fn a_small_file_cannot_need_gigabytes_unless_asked() {
     let doc = instanced_grid(70, 9);
     let path = dir.path().join("inst.dae");
     std::fs::write(&path, &doc).unwrap();
-    let cap = raypack::memory::default_max_primitives(doc.len() as u64);
+    let cap = raypack::scene::footprint::default_max_primitives(doc.len() as u64);
     assert!(cap < 5_017_600, "the default cap {cap} does not refuse this file");
     let info = |extra: &[&str]| {
         let args = [&["info", path.to_str().unwrap(), "--quality", "fast"][..], extra].concat();

@@ -1,6 +1,6 @@
-//! Every file raypack reads because a user named it goes through `raypack::io::input`
+//! Every file raypack reads because a user named it goes through `raypack::fs::input`
 //! (`open_regular` / `read_regular`: regular files only, never blocking, size-capped), and
-//! every file it writes through `raypack::io::output` (`stage` / `write_file`: whole or not at
+//! every file it writes through `raypack::fs::output` (`stage` / `write_file`: whole or not at
 //! all, never through a link, never over an input). This test reads the sources of the
 //! library, the CLI and the Python module and fails when a file is opened, read or written
 //! anywhere else, so that the next new input or output cannot skip the rules.
@@ -21,9 +21,9 @@ const FILE_CALLS: [&str; 8] = [
 
 /// The files allowed to make them, and why.
 const ALLOWED: [(&str, &str); 4] = [
-    ("src/io/input.rs", "the one reader"),
-    ("src/io/output.rs", "the one writer"),
-    ("src/memory.rs", "the kernel's own files: /proc and /sys"),
+    ("src/fs/input.rs", "the one reader"),
+    ("src/fs/output.rs", "the one writer"),
+    ("src/system.rs", "the kernel's own files: /proc and /sys"),
     ("src/bin/raypack/machine.rs", "the kernel's own files: /proc"),
 ];
 
@@ -66,6 +66,6 @@ fn files_are_read_and_written_in_one_place_each() {
     }
     assert!(
         offences.is_empty(),
-        "files opened outside raypack::io::input (reads) and raypack::io::output (writes): {offences:#?}"
+        "files opened outside raypack::fs::input (reads) and raypack::fs::output (writes): {offences:#?}"
     );
 }

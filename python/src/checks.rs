@@ -1,6 +1,6 @@
 //! Checks the module makes before it starts work, in the CLI's words: `RAYPACK_ISA`
 //! ([`raypack::Isa::env_report`]) and whether a render or a ray set fits in memory
-//! ([`raypack::memory`], the estimate behind `raypack render -r`), so that an impossible size
+//! ([`raypack::render::render_bytes`], the estimate behind `raypack render -r`), so that an impossible size
 //! is a `MemoryError` at once instead of an abort of the interpreter.
 
 use pyo3::exceptions::{PyMemoryError, PyUserWarning, PyValueError};
@@ -28,8 +28,8 @@ pub fn render_memory(settings: &RenderSettings, threads: Option<usize>) -> PyRes
     let (w, h) = (settings.width, settings.height);
     let threads = threads.unwrap_or_else(rayon::current_num_threads);
     let returned = 3 * std::mem::size_of::<f32>() as u64;
-    let per_pixel = raypack::memory::render_bytes_per_pixel(settings, false) + returned;
-    let needed = raypack::memory::render_bytes(settings, threads, false)
+    let per_pixel = raypack::render::render_bytes_per_pixel(settings, false) + returned;
+    let needed = raypack::render::render_bytes(settings, threads, false)
         .saturating_add((w as u64).saturating_mul(h as u64).saturating_mul(returned));
     fits("width, height", w, h, needed, per_pixel)
 }
@@ -43,12 +43,12 @@ pub fn ray_sets_size(width: usize, height: usize) -> PyResult<()> {
             "width, height: expected 1 to 32768 rays each, got {width} x {height}"
         )));
     }
-    let per_ray = raypack::memory::BENCH_BYTES_PER_PIXEL + 3 * 7 * std::mem::size_of::<f32>() as u64;
+    let per_ray = raypack::raysets::BENCH_BYTES_PER_PIXEL + 3 * 7 * std::mem::size_of::<f32>() as u64;
     fits("width, height", width, height, (width * height) as u64 * per_ray, per_ray)
 }
 
 fn fits(names: &str, width: usize, height: usize, needed: u64, per_pixel: u64) -> PyResult<()> {
-    raypack::memory::check_fits(width, height, needed, per_pixel).map_err(|e| {
+    raypack::system::check_fits(width, height, needed, per_pixel).map_err(|e| {
         let (w, h) = e.fits;
         PyMemoryError::new_err(format!(
             "{names}: {width} x {height}: {e}; use a smaller size, such as width={w}, height={h}"

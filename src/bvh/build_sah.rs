@@ -321,7 +321,7 @@ pub fn build_bvh2_spatial(
     };
     let extra = (f64::from(budget.max(0.0)) * n as f64) as usize;
     prims.reserve_exact(extra);
-    crate::memory::advise_huge_pages(&prims);
+    crate::system::advise_huge_pages(&prims);
     prims.resize(n + extra, BuildPrim::new(Aabb::EMPTY, 0));
     let (mut slots, leaves) = build_slots(&mut prims, n, info, opts, first_of_second_kind, Some(&splitter));
     let prims = squeeze(&mut slots, &prims);
@@ -334,7 +334,7 @@ pub fn build_bvh2_spatial(
 /// range: afterwards every subtree's references are contiguous, as [`compact`] and the
 /// collapse require.
 fn squeeze(slots: &mut [Slot], prims: &[BuildPrim]) -> Vec<BuildPrim> {
-    let mut out = crate::memory::huge_page_vec(prims.len());
+    let mut out = crate::system::huge_page_vec(prims.len());
     let mut stack = vec![0usize];
     while let Some(s) = stack.pop() {
         let slot = slots[s];
@@ -354,7 +354,7 @@ fn squeeze(slots: &mut [Slot], prims: &[BuildPrim]) -> Vec<BuildPrim> {
 /// writes to fresh memory, page faults included, are a large part of the cost).
 fn prim_ids(prims: &[BuildPrim]) -> Vec<u32> {
     use rayon::prelude::*;
-    let mut ids = crate::memory::huge_page_vec(prims.len());
+    let mut ids = crate::system::huge_page_vec(prims.len());
     prims.par_iter().map(|p| p.id()).collect_into_vec(&mut ids);
     ids
 }
@@ -392,7 +392,7 @@ fn build_slots(
     // subtree may end up holding. Zero-filled memory costs nothing until touched, and only
     // used slots are ever read.
     let mut slots: Vec<Slot> = bytemuck::zeroed_vec(2 * prims.len() - 1);
-    crate::memory::advise_huge_pages(&slots);
+    crate::system::advise_huge_pages(&slots);
     let max_leaf = opts.max_leaf_size.clamp(1, INNER as usize - 1);
     // See `BuildQuality`: below High, every node of at most `max_leaf` primitives is a leaf.
     let leaf_at_most = if opts.quality == BuildQuality::High { 1 } else { max_leaf };
@@ -978,7 +978,7 @@ fn compact(slots: &[Slot], leaves: usize, prims: &[BuildPrim]) -> Vec<Bvh2Node> 
     // touches first (on a 20M-triangle mesh the page faults of the array are a second or
     // more). A binary tree has one inner node fewer than leaves.
     let mut nodes: Vec<Bvh2Node> = bytemuck::zeroed_vec(2 * leaves - 1);
-    crate::memory::advise_huge_pages(&nodes);
+    crate::system::advise_huge_pages(&nodes);
     let (root, rest) = nodes.split_first_mut().expect("a root");
     let (node, _, used) = compact_rec(slots, prims, 0, rest, 1);
     debug_assert_eq!(used, rest.len());

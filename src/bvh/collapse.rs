@@ -638,7 +638,7 @@ pub fn collapse_for<T: TriBlock>(
     // Allocated and first written in parallel (as the output arrays below are first written
     // by parallel tasks): for large meshes the page faults of fresh memory are a large part
     // of the cost.
-    let mut plans = crate::memory::huge_page_vec(m);
+    let mut plans = crate::system::huge_page_vec(m);
     (0..m).into_par_iter().map(|_| AtomicU64::new(0)).collect_into_vec(&mut plans);
     let mut p = Planned { bvh2: &bvh2, first_sphere, plans, spheres: true };
     let mut out = Arrays { nodes: vec![Bvh8Node::EMPTY], tris: Vec::new(), spheres: Vec::new() };

@@ -583,9 +583,9 @@ impl<T: TriBlock> Bvh8<T> {
 
     /// True when the streams interleave the single rays of incoherent packets
     /// ([`crate::bvh::traverse_interleaved`]): when the tree is larger than the last-level
-    /// cache ([`crate::memory::last_level_cache_bytes`]).
+    /// cache ([`crate::system::last_level_cache_bytes`]).
     pub fn interleaves(&self) -> bool {
-        self.bytes() as u64 > crate::memory::last_level_cache_bytes()
+        self.bytes() as u64 > crate::system::last_level_cache_bytes()
     }
 
     /// Closest hits of `rays` into `hits` (same length) on the calling thread as single rays,

@@ -22,11 +22,11 @@ use crate::scene::Camera;
 use std::path::Path;
 
 /// Reads a CS184 camera settings file: a regular file of at most
-/// [`crate::io::input::MAX_CAMERA_FILE_BYTES`] (a FIFO or a device is an error, not a hang).
+/// [`crate::fs::input::MAX_CAMERA_FILE_BYTES`] (a FIFO or a device is an error, not a hang).
 pub fn load_camera_file(path: &Path) -> Result<Camera, LoadError> {
     let io = |source| LoadError::Io { path: path.to_path_buf(), source };
     let bytes =
-        crate::io::input::read_regular(path, crate::io::input::MAX_CAMERA_FILE_BYTES, "camera files").map_err(io)?;
+        crate::fs::input::read_regular(path, crate::fs::input::MAX_CAMERA_FILE_BYTES, "camera files").map_err(io)?;
     let text = String::from_utf8(bytes)
         .map_err(|e| LoadError::parse(path, format!("byte {}", e.utf8_error().valid_up_to()), "not UTF-8 text"))?;
     parse_camera_file(&text).map_err(|(line, message)| LoadError::Parse {

@@ -15,15 +15,13 @@
 pub mod camera_file;
 pub mod dae;
 pub mod error;
-pub mod input;
 pub mod obj;
-pub mod output;
 pub mod ply;
 pub mod rays;
 
+pub use crate::fs::input::MAX_MTL_BYTES;
 pub use dae::{CameraPlacement, DaeOptions};
 pub use error::LoadError;
-pub use input::MAX_MTL_BYTES;
 
 use crate::math::{Aabb, Vec3};
 use crate::scene::{Camera, Light, Material, SceneBuilder};
@@ -94,17 +92,17 @@ pub struct LoadOptions {
     /// `--max-primitives`.
     pub max_primitives: Option<u64>,
     /// Without [`LoadOptions::max_primitives`], cap the primitives at
-    /// [`crate::memory::default_max_primitives`] of the file's size (what the memory estimate
+    /// [`crate::scene::footprint::default_max_primitives`] of the file's size (what the memory estimate
     /// allows a file of that size without asking), with errors that say so. The CLI's default.
     pub memory_cap: bool,
 }
 
 /// [`load_scene`] with limits. The file is read only if it is a regular file of at most
-/// [`input::MAX_SCENE_BYTES`] (a FIFO or `/dev/zero` is an error, not a hang).
+/// [`crate::fs::input::MAX_SCENE_BYTES`] (a FIFO or `/dev/zero` is an error, not a hang).
 pub fn load_scene_with_options(path: &Path, opts: &LoadOptions) -> Result<LoadedScene, LoadError> {
     let format =
         SceneFormat::from_path(path).ok_or_else(|| LoadError::UnsupportedFormat { path: path.to_path_buf() })?;
-    let bytes = input::read_regular(path, input::MAX_SCENE_BYTES, "scene files")
+    let bytes = crate::fs::input::read_regular(path, crate::fs::input::MAX_SCENE_BYTES, "scene files")
         .map_err(|source| LoadError::Io { path: path.to_path_buf(), source })?;
     let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
     let read_mtl = move |p: &Path| read_material_library(&dir.join(p));
@@ -115,7 +113,7 @@ pub fn load_scene_with_options(path: &Path, opts: &LoadOptions) -> Result<Loaded
 /// naming `mtllib /dev/zero` or a FIFO must not make the loader read forever. The error says
 /// why not, for the warning.
 fn read_material_library(path: &Path) -> Result<Vec<u8>, String> {
-    input::read_regular(path, MAX_MTL_BYTES, "material libraries").map_err(|e| match e.kind() {
+    crate::fs::input::read_regular(path, MAX_MTL_BYTES, "material libraries").map_err(|e| match e.kind() {
         std::io::ErrorKind::NotFound => "not found".to_string(),
         _ => e.to_string(),
     })
@@ -145,8 +143,11 @@ fn load_with(
     opts: &LoadOptions,
 ) -> Result<LoadedScene, LoadError> {
     let default_cap = opts.max_primitives.is_none() && opts.memory_cap;
-    let max_primitives =
-        if default_cap { Some(crate::memory::default_max_primitives(bytes.len() as u64)) } else { opts.max_primitives };
+    let max_primitives = if default_cap {
+        Some(crate::scene::footprint::default_max_primitives(bytes.len() as u64))
+    } else {
+        opts.max_primitives
+    };
     let parsed = parse_capped(bytes, format, path, read_mtl, max_primitives, default_cap);
     let (mut builder, warnings) = match (parsed, max_primitives) {
         (Err(e), Some(max)) if default_cap => return Err(name_default_cap(e, max, bytes.len())),
@@ -213,7 +214,9 @@ fn name_default_cap(e: LoadError, max: u64, file_len: usize) -> LoadError {
     let named = format!("more than --max-primitives {max}");
     match e {
         LoadError::Parse { path, location, message } if message.contains(&named) => {
-            use crate::memory::{DEFAULT_SCENE_BYTES, DEFAULT_SCENE_BYTES_PER_FILE_BYTE, SCENE_BYTES_PER_PRIMITIVE};
+            use crate::scene::footprint::{
+                DEFAULT_SCENE_BYTES, DEFAULT_SCENE_BYTES_PER_FILE_BYTE, SCENE_BYTES_PER_PRIMITIVE,
+            };
             let default = format!(
                 "more than the {max} raypack allows a file of {file_len} bytes without --max-primitives ({} per byte, \
                  at least {}, at most what fits in the memory available at {SCENE_BYTES_PER_PRIMITIVE} bytes each); \

@@ -72,10 +72,10 @@ impl RayFileFormat {
 }
 
 /// Reads the rays of `path` (layout by extension), if it is a regular file of at most
-/// [`crate::io::input::MAX_RAY_FILE_BYTES`] (a FIFO or `/dev/zero` is an error, not a hang
+/// [`crate::fs::input::MAX_RAY_FILE_BYTES`] (a FIFO or `/dev/zero` is an error, not a hang
 /// or an endless read).
 pub fn read_rays(path: &Path) -> Result<Vec<Ray>, RayFileError> {
-    use crate::io::input::{MAX_RAY_FILE_BYTES, read_regular};
+    use crate::fs::input::{MAX_RAY_FILE_BYTES, read_regular};
     let format = RayFileFormat::of(path).ok_or_else(|| RayFileError::UnknownFormat { path: path.into() })?;
     let bytes = read_regular(path, MAX_RAY_FILE_BYTES, "ray files")
         .map_err(|source| RayFileError::Io { path: path.into(), source })?;
@@ -185,7 +185,7 @@ pub fn encode_rays(rays: &[Ray], format: RayFileFormat) -> Vec<u8> {
 /// Writes `rays` to `path` (layout by extension), whole or not at all.
 pub fn write_rays(path: &Path, rays: &[Ray]) -> Result<(), RayFileError> {
     let format = RayFileFormat::of(path).ok_or_else(|| RayFileError::UnknownFormat { path: path.into() })?;
-    crate::io::output::write_file(path, &encode_rays(rays, format))
+    crate::fs::output::write_file(path, &encode_rays(rays, format))
         .map_err(|e| RayFileError::Io { path: e.path, source: e.source })
 }
 

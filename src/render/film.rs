@@ -1,6 +1,6 @@
 //! The film: a width × height buffer of linear radiance, and its atomic output as PNG (8-bit
 //! sRGB, clamped as CS184 does) or OpenEXR (linear 32-bit float) through
-//! [`crate::io::output`].
+//! [`crate::fs::output`].
 
 use crate::math::Vec3;
 use std::path::{Path, PathBuf};
@@ -78,12 +78,12 @@ impl Film {
 
     /// Writes the film to `path`: OpenEXR (linear) when it ends in `.exr`, PNG otherwise.
     /// The file appears whole or not at all, and only a regular file (or nothing) at `path`
-    /// is replaced ([`crate::io::output`]).
+    /// is replaced ([`crate::fs::output`]).
     pub fn write(&self, path: &Path, encoding: Encoding) -> Result<(), ImageError> {
         let bytes = self
             .encode(ImageFormat::of(path), encoding)
             .map_err(|message| ImageError::Encode { path: path.to_path_buf(), message })?;
-        crate::io::output::write_file(path, &bytes).map_err(ImageError::from)
+        crate::fs::output::write_file(path, &bytes).map_err(ImageError::from)
     }
 
     /// The film as the bytes of a `format` file (PNG encoded with `encoding`; EXR linear).
@@ -138,8 +138,8 @@ impl ImageFormat {
     }
 }
 
-impl From<crate::io::output::OutputError> for ImageError {
-    fn from(e: crate::io::output::OutputError) -> Self {
+impl From<crate::fs::output::OutputError> for ImageError {
+    fn from(e: crate::fs::output::OutputError) -> Self {
         ImageError::Io { path: e.path, source: e.source }
     }
 }
@@ -161,7 +161,7 @@ pub fn encode_png(width: usize, height: usize, rgb: &[u8]) -> Result<Vec<u8>, St
 pub fn write_png(path: &Path, width: usize, height: usize, rgb: &[u8]) -> Result<(), ImageError> {
     let bytes =
         encode_png(width, height, rgb).map_err(|message| ImageError::Encode { path: path.to_path_buf(), message })?;
-    crate::io::output::write_file(path, &bytes).map_err(ImageError::from)
+    crate::fs::output::write_file(path, &bytes).map_err(ImageError::from)
 }
 
 #[cfg(test)]

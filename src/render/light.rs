@@ -503,7 +503,7 @@ mod tests {
     /// irradiance its lights give a point of the floor is the lamp's by Lambert's formula.
     #[test]
     fn built_in_lamp_lights_the_floor_once() {
-        let (scene, _) = crate::io::default_scene().commit(&BuildOptions::default());
+        let (scene, _) = crate::testing::cornell_box().commit(&BuildOptions::default());
         let set = LightSet::new(&scene);
         assert_eq!(set.num_stand_ins(), 2, "the lamp quad's two triangles stand in for the area light");
         let Some(SampledLight::Rect { center, dim_x, dim_y, radiance, .. }) = set.lights.first() else {

@@ -22,6 +22,7 @@ pub mod frame;
 pub mod heatmap;
 pub mod integrator;
 pub mod light;
+pub mod memory;
 pub mod merge;
 pub mod order;
 pub mod part;
@@ -36,6 +37,7 @@ pub mod window;
 
 pub use film::{Encoding, Film, ImageError, ImageFormat};
 pub use integrator::IntegratorKind;
+pub use memory::{render_bytes, render_bytes_per_pixel};
 pub use order::RayOrder;
 pub use stats::{RayCounts, RayKind, RayLog};
 pub use wavefront::{PhaseTimes, StreamOrder};

@@ -292,7 +292,7 @@ impl SceneBuilder {
             match prims.as_deref_mut() {
                 None => all.map(|i| verdict(t.vertices(i))).collect_into_vec(&mut verdicts),
                 Some(prims) => {
-                    *prims = crate::memory::huge_page_vec(t.len() + in_spheres.len());
+                    *prims = crate::system::huge_page_vec(t.len() + in_spheres.len());
                     all.map(|i| {
                         let v = t.vertices(i);
                         (verdict(v), BuildPrim::new(Aabb::of_triangle(v), i as u32))
@@ -386,7 +386,7 @@ impl Filtered {
     fn build_prims(&self) -> Vec<BuildPrim> {
         let (triangles, spheres) = (&self.triangles, &self.spheres);
         let nt = triangles.len();
-        let mut prims: Vec<BuildPrim> = crate::memory::huge_page_vec(nt + spheres.len());
+        let mut prims: Vec<BuildPrim> = crate::system::huge_page_vec(nt + spheres.len());
         use rayon::prelude::*;
         (0..nt)
             .into_par_iter()

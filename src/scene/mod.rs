@@ -4,6 +4,7 @@
 pub mod builder;
 pub mod cache;
 pub mod camera;
+pub mod footprint;
 pub mod light;
 pub mod material;
 pub mod query;

@@ -413,7 +413,7 @@ mod tests {
     use crate::{Hit, Ray};
 
     fn scene(watertight: bool) -> (Scene, BuildOptions) {
-        let mut b = crate::io::default_scene();
+        let mut b = crate::testing::cornell_box();
         let m = b.add_material(Material {
             name: "gold é".into(),
             bsdf: Bsdf::Microfacet { eta: Vec3::ONE, k: Vec3::ONE, alpha: 0.3 },

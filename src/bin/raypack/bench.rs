@@ -907,7 +907,7 @@ fn rebuild_time(builder: &SceneBuilder, opts: &BuildOptions) -> Duration {
 /// `raypack bench`: checks the settings and the memory, builds the scene, runs [`run_bench`] and
 /// prints or writes the report.
 pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
-    use raypack::io::output::{OutputOptions, check_target, write_file_with};
+    use raypack::fs::output::{OutputOptions, check_target, write_file_with};
     let (width, height) = (a.resolution[0], a.resolution[1]);
     if width == 0 || height == 0 || width > 1 << 15 || height > 1 << 15 {
         return Err(CliError::Usage(format!("-r {width} {height}: width and height must be between 1 and 32768")));
@@ -948,7 +948,7 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     if let Some(dir) = &a.report {
         crate::report::check_report_dir(dir, &[dir.join("bench.json")], &report_inputs)?;
     }
-    let per_ray = raypack::memory::BENCH_BYTES_PER_PIXEL;
+    let per_ray = raypack::raysets::BENCH_BYTES_PER_PIXEL;
     check_memory(width, height, (width * height) as u64 * per_ray, per_ray)?;
     let (builder, warnings) = load(scene_path, a.max_primitives)?;
     print_warnings(&warnings);

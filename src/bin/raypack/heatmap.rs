@@ -48,10 +48,10 @@ pub(crate) fn cmd_heatmap(a: RenderArgs) -> Result<(), CliError> {
         return Err(CliError::Usage(format!("-f {}: a heatmap is written as .png", output.display())));
     }
     let inputs: Vec<&Path> = [a.scene.as_deref(), a.camera.as_deref()].into_iter().flatten().collect();
-    let out_opts = raypack::io::output::OutputOptions::protecting(&inputs);
+    let out_opts = raypack::fs::output::OutputOptions::protecting(&inputs);
     let to_stdout = output == Path::new("-");
     if !to_stdout {
-        raypack::io::output::check_target(&output, &out_opts)?;
+        raypack::fs::output::check_target(&output, &out_opts)?;
     }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.unwrap_or(0))
@@ -104,7 +104,7 @@ pub(crate) fn cmd_heatmap(a: RenderArgs) -> Result<(), CliError> {
                 .and_then(|()| stdout.flush())
                 .map_err(|source| raypack::render::ImageError::Io { path: output.clone(), source })?;
         } else {
-            raypack::io::output::write_file_with(&output, &bytes, &out_opts)?;
+            raypack::fs::output::write_file_with(&output, &bytes, &out_opts)?;
             eprintln!("[raypack] Saved {}", output.display());
         }
         Ok(())

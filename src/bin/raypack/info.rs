@@ -6,9 +6,10 @@ use crate::{CliError, InfoArgs, print_warnings};
 use raypack::bvh::{BuildOptions, BuildQuality, Bvh8Stats, BvhStats};
 use raypack::io::LoadError;
 use raypack::math::Aabb;
-use raypack::memory::{PeakResident, peak_resident_bytes, store_bytes};
+use raypack::scene::footprint::store_bytes;
 use raypack::scene::{CommitReport, SceneBuilder, TrianglesSoa};
 use raypack::simd::Isa;
+use raypack::system::{PeakResident, peak_resident_bytes};
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -336,7 +337,7 @@ impl SceneInfo {
             if let Some(p) = bi.peak_added_bytes {
                 let _ = writeln!(s, "  peak       +{} resident during the commit", mb(p as usize));
             }
-            let llc = mb(raypack::memory::last_level_cache_bytes() as usize);
+            let llc = mb(raypack::system::last_level_cache_bytes() as usize);
             let _ = if bi.interleaves {
                 writeln!(
                     s,

@@ -448,7 +448,7 @@ enum CliError {
     #[error(transparent)]
     Bench(#[from] bench::BenchError),
     #[error(transparent)]
-    Output(#[from] raypack::io::output::OutputError),
+    Output(#[from] raypack::fs::output::OutputError),
     #[error(transparent)]
     Rays(#[from] raypack::io::rays::RayFileError),
     #[error(transparent)]
@@ -523,7 +523,7 @@ fn load(scene: Option<&Path>, max_primitives: Option<u64>) -> Result<(SceneBuild
 /// Refuses an image (or ray set) of `width × height` whose buffers, `needed` bytes in all
 /// (`per_pixel` per pixel), cannot fit in the memory this process may still use.
 fn check_memory(width: usize, height: usize, needed: u64, per_pixel: u64) -> Result<(), CliError> {
-    raypack::memory::check_fits(width, height, needed, per_pixel).map_err(|e| {
+    raypack::system::check_fits(width, height, needed, per_pixel).map_err(|e| {
         let (w, h) = e.fits;
         CliError::Usage(format!("-r {width} {height}: {e}; use a smaller size, such as -r {w} {h}"))
     })

@@ -42,7 +42,7 @@ fn hint(e: &MergeError) -> String {
 
 /// Refuses to allocate `bytes` for `what` when the process cannot.
 fn check_memory(bytes: u64, what: &str) -> Result<(), CliError> {
-    use raypack::memory::{available, human};
+    use raypack::system::{available, human};
     match available() {
         Some(avail) if bytes > avail.bytes => Err(CliError::Usage(format!(
             "{what} needs about {}, but only {} can be allocated ({})",
@@ -66,11 +66,11 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), CliError> {
         }
     };
     let inputs: Vec<&Path> = a.parts.iter().map(PathBuf::as_path).collect();
-    let out_opts = raypack::io::output::OutputOptions::protecting(&inputs);
-    raypack::io::output::check_target(&a.output, &out_opts)?;
+    let out_opts = raypack::fs::output::OutputOptions::protecting(&inputs);
+    raypack::fs::output::check_target(&a.output, &out_opts)?;
     let mut merger = Merger::new();
     for path in &a.parts {
-        let bytes = raypack::io::input::read_regular(path, MAX_PART_BYTES, "image parts")
+        let bytes = raypack::fs::input::read_regular(path, MAX_PART_BYTES, "image parts")
             .map_err(|source| MergeFailure::Read { path: path.clone(), source })?;
         let not_part = |source| MergeFailure::NotAPart { path: path.clone(), source };
         let header = PartHeader::read(&bytes).map_err(not_part)?;
@@ -95,7 +95,7 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), CliError> {
             whole.film.encode(ImageFormat::Png, encoding).map_err(encode_error)?
         }
     };
-    raypack::io::output::write_file_with(&a.output, &bytes, &out_opts)?;
+    raypack::fs::output::write_file_with(&a.output, &bytes, &out_opts)?;
     if !a.quiet {
         eprintln!(
             "[raypack] Merged {} parts into {} ({}x{}){}.",

@@ -73,11 +73,11 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         return Err(CliError::Usage("-f - with -a: the sample-rate image needs a file name (-f NAME.png)".into()));
     }
     let inputs: Vec<&Path> = [a.scene.as_deref(), a.camera.as_deref()].into_iter().flatten().collect();
-    let out_opts = raypack::io::output::OutputOptions::protecting(&inputs);
+    let out_opts = raypack::fs::output::OutputOptions::protecting(&inputs);
     let rate_path = adaptive.map(|_| render::adaptive::rate_path(&output));
     if !to_stdout {
         for p in std::iter::once(&output).chain(&rate_path) {
-            raypack::io::output::check_target(p, &out_opts)?;
+            raypack::fs::output::check_target(p, &out_opts)?;
         }
         if render::ImageFormat::for_path(&output).is_none() {
             let can: Vec<String> =
@@ -103,7 +103,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
     }
     let window = window.unwrap_or(render::PixelBounds::full(width, height));
     if let Some(p) = a.write_camera.as_deref().filter(|p| *p != Path::new("-")) {
-        raypack::io::output::check_target(p, &out_opts)?;
+        raypack::fs::output::check_target(p, &out_opts)?;
     }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.unwrap_or(0))
@@ -133,8 +133,8 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         check_memory(
             window.width(),
             window.height(),
-            raypack::memory::render_bytes(&sized, rayon::current_num_threads(), exr),
-            raypack::memory::render_bytes_per_pixel(&sized, exr),
+            raypack::render::render_bytes(&sized, rayon::current_num_threads(), exr),
+            raypack::render::render_bytes_per_pixel(&sized, exr),
         )?;
         // Read before the scene: a bad camera file fails at once.
         let file_camera = a.camera.as_deref().map(raypack::io::camera_file::load_camera_file).transpose()?;
@@ -224,7 +224,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
                 .and_then(|()| stdout.flush())
                 .map_err(|source| render::ImageError::Io { path: output.clone(), source })?;
         } else {
-            use raypack::io::output::{commit_all, stage};
+            use raypack::fs::output::{commit_all, stage};
             if !quiet {
                 eprint!("[raypack] Saving to file: {}... ", output.display());
             }
@@ -305,7 +305,7 @@ fn check_ignored_flags(a: &RenderArgs) -> Result<(), CliError> {
 }
 
 /// Writes the camera file `text` to `path` (`-`: standard output, as for `-o -`).
-fn write_camera(path: &Path, text: &str, opts: &raypack::io::output::OutputOptions) -> Result<(), CliError> {
+fn write_camera(path: &Path, text: &str, opts: &raypack::fs::output::OutputOptions) -> Result<(), CliError> {
     if path == Path::new("-") {
         use std::io::Write;
         let mut stdout = std::io::stdout().lock();
@@ -315,7 +315,7 @@ fn write_camera(path: &Path, text: &str, opts: &raypack::io::output::OutputOptio
             .map_err(|source| raypack::render::ImageError::Io { path: path.into(), source })?;
         return Ok(());
     }
-    raypack::io::output::write_file_with(path, text.as_bytes(), opts)?;
+    raypack::fs::output::write_file_with(path, text.as_bytes(), opts)?;
     eprintln!("[raypack] Wrote the camera to {} (render from it with -c {0}); nothing rendered.", path.display());
     Ok(())
 }

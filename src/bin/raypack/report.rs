@@ -8,7 +8,7 @@
 //! ratio is computed from "results". Every text from a JSON is escaped in the HTML (and by
 //! plotters in the SVG).
 //!
-//! Charts are drawn in memory and written with `index.html` through [`raypack::io::output`],
+//! Charts are drawn in memory and written with `index.html` through [`raypack::fs::output`],
 //! all or nothing: never through a link or into a FIFO planted in the directory. Building them
 //! is linear in the results; a chart shows at most [`MAX_SERIES`] bars per group (the fastest
 //! series, the others counted in its legend), and a report of more groups or charts than can
@@ -352,7 +352,7 @@ fn charts(inputs: &[Input]) -> Result<Vec<Bars>, CliError> {
 }
 
 fn register_font() -> Result<(), CliError> {
-    use raypack::io::input::{MAX_FONT_BYTES, read_regular};
+    use raypack::fs::input::{MAX_FONT_BYTES, read_regular};
     let bytes = FONTS.iter().find_map(|p| read_regular(Path::new(p), MAX_FONT_BYTES, "font files").ok()).ok_or_else(|| {
         CliError::Usage(format!(
             "the report needs a TrueType font to lay out its text: none of {FONTS:?} exists (Debian: apt-get install fonts-dejavu-core)"
@@ -365,9 +365,9 @@ fn register_font() -> Result<(), CliError> {
 
 /// How the report's files are written: never over an input, never into a FIFO (a report
 /// directory holds files).
-fn output_options(inputs: &[PathBuf]) -> raypack::io::output::OutputOptions {
+fn output_options(inputs: &[PathBuf]) -> raypack::fs::output::OutputOptions {
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
-    raypack::io::output::OutputOptions { allow_fifo: false, ..raypack::io::output::OutputOptions::protecting(&inputs) }
+    raypack::fs::output::OutputOptions { allow_fifo: false, ..raypack::fs::output::OutputOptions::protecting(&inputs) }
 }
 
 /// The names a report writes in its directory: `index.html` and `chartN.png`.
@@ -383,7 +383,7 @@ pub(crate) fn check_report_dir(dir: &Path, extra: &[PathBuf], inputs: &[PathBuf]
     let bad = |m: String| CliError::Usage(format!("report directory {}: {m}", dir.display()));
     match std::fs::metadata(dir) {
         Ok(m) if !m.is_dir() => {
-            return Err(bad(format!("is {}, not a directory", raypack::io::input::describe_type(&m))));
+            return Err(bad(format!("is {}, not a directory", raypack::fs::input::describe_type(&m))));
         }
         Ok(_) => {}
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
@@ -396,7 +396,7 @@ pub(crate) fn check_report_dir(dir: &Path, extra: &[PathBuf], inputs: &[PathBuf]
     tempfile::tempfile_in(dir).map_err(|e| bad(format!("cannot create files in it: {e}")))?;
     let opts = output_options(inputs);
     for p in report_files(dir).chain(extra.iter().cloned()) {
-        raypack::io::output::check_target(&p, &opts)?;
+        raypack::fs::output::check_target(&p, &opts)?;
     }
     Ok(())
 }
@@ -404,7 +404,7 @@ pub(crate) fn check_report_dir(dir: &Path, extra: &[PathBuf], inputs: &[PathBuf]
 /// Writes the report of the bench JSON files `inputs` into `out`: `index.html` and its PNG
 /// charts, all or none.
 pub(crate) fn write_report(inputs: &[PathBuf], out: &Path) -> Result<(), CliError> {
-    use raypack::io::output::{commit_all, stage};
+    use raypack::fs::output::{commit_all, stage};
     if inputs.is_empty() {
         return Err(CliError::Usage("raypack report: give at least one bench JSON file".into()));
     }

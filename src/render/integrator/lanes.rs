@@ -526,7 +526,7 @@ mod tests {
         use crate::render::stats::RayLog;
         use crate::render::wavefront::{PhaseTimes, StreamOrder, Wavefront};
         use crate::render::{IntegratorKind, RenderSettings};
-        let mut builder = crate::io::default_scene();
+        let mut builder = crate::testing::cornell_box();
         let centre = builder.bounds().center();
         builder.add_light(crate::scene::Light::Point { position: centre + Vec3::Y * 0.3, intensity: Vec3::splat(0.4) });
         let glow = builder.add_material(crate::Material::emissive(Vec3::splat(2.0)));

@@ -31,12 +31,12 @@
 //! others. Any other file is copied into private anonymous memory first
 //! ([`CacheReport::copied`]), whose sections are then used in place as a mapping's would be,
 //! so that another user truncating the file during a render cannot kill it with `SIGBUS`.
-//! Files are written through [`crate::io::output`] (an unpredictable temporary name created
+//! Files are written through [`crate::fs::output`] (an unpredictable temporary name created
 //! exclusively, renamed over a regular file or nothing) with mode 0644, in a directory
 //! created with mode 0755; a directory that others can write is reported. Before a file is
 //! written, the temporary files of its earlier writers that were killed mid-write (which
 //! nothing else removes) are removed: only this user's, and never one a live writer holds
-//! locked ([`crate::io::output::remove_stale_temporaries`]).
+//! locked ([`crate::fs::output::remove_stale_temporaries`]).
 //!
 //! Layout (little-endian, as the machine writes it):
 //!
@@ -317,7 +317,7 @@ fn load(
     test: TriangleTest,
     shared: bool,
 ) -> Result<Option<(Accel, bool)>, CacheError> {
-    use crate::io::input::open_regular;
+    use crate::fs::input::open_regular;
     let num_prims = geometry.0.len() + geometry.1.len();
     let (file, len) = match open_regular(path, max_file_bytes(num_prims), "BVH cache files of this scene") {
         Ok(f) => f,
@@ -464,7 +464,7 @@ fn io(p: &Path) -> impl Fn(std::io::Error) -> CacheError + '_ {
 }
 
 fn store(dir: &Path, path: &Path, key: CacheKey, scene: &Scene) -> Result<(), CacheError> {
-    use crate::io::output::{OutputOptions, stage};
+    use crate::fs::output::{OutputOptions, stage};
     let mut create = std::fs::DirBuilder::new();
     create.recursive(true);
     #[cfg(unix)]
@@ -472,14 +472,14 @@ fn store(dir: &Path, path: &Path, key: CacheKey, scene: &Scene) -> Result<(), Ca
     create.create(dir).map_err(io(dir))?;
     // What writers of this file killed before they finished left behind (never another's).
     #[cfg(unix)]
-    crate::io::output::remove_stale_temporaries(path);
+    crate::fs::output::remove_stale_temporaries(path);
     let mut w = SectionWriter::new();
     let bounds = [scene.bounds];
     push_accel(&mut w, scene, &bounds);
     // Readable by the other users of a shared cache; only a regular file is replaced.
     let opts = OutputOptions { mode: 0o644, exact_mode: true, allow_fifo: false, sync: false, ..Default::default() };
     let mut w = Some(w);
-    let output = |e: crate::io::output::OutputError| CacheError::Io { path: e.path, source: e.source };
+    let output = |e: crate::fs::output::OutputError| CacheError::Io { path: e.path, source: e.source };
     stage(path, &opts, &mut |out| w.take().map_or(Ok(()), |w| w.write_to(key, out).map(|_| ())))
         .map_err(output)?
         .commit()

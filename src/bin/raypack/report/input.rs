@@ -1,10 +1,10 @@
-//! A bench JSON read for the report: through [`raypack::io::input`] (a regular file of at
+//! A bench JSON read for the report: through [`raypack::fs::input`] (a regular file of at
 //! most [`MAX_BENCH_JSON_BYTES`]), and every field the report shows checked for its type on
 //! the way in. Reports are built from other machines' files: a field of the wrong type is an
 //! error naming the file and the field, never text passed through to the HTML.
 
 use crate::CliError;
-use raypack::io::input::{MAX_BENCH_JSON_BYTES, read_regular};
+use raypack::fs::input::{MAX_BENCH_JSON_BYTES, read_regular};
 use serde_json::{Map, Value};
 use std::path::Path;
 

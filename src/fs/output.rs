@@ -19,7 +19,7 @@
 //! between the last check and the rename; the rename then replaces that entry itself (never
 //! what a link points to), so nothing outside the directory entry is written.
 
-use crate::io::input::describe_type;
+use crate::fs::input::describe_type;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 

@@ -1,44 +1,10 @@
-//! Memory a command will need, estimated before it starts, and memory the process may use:
-//! a size that cannot fit is refused up front instead of aborting minutes later. Also what a
-//! committed scene holds ([`store_bytes`]; the BVHs count their own, [`crate::bvh::Bvh8::bytes`]
-//! and [`crate::bvh::Bvh2::bytes`]) and what the process used at its peak
-//! ([`peak_resident_bytes`], [`PeakResident`]).
-//!
-//! The estimates count the buffers that grow with the image (or ray set) size; the scene and
-//! its BVH come on top, so an estimate that barely fits may still fail.
-
-use crate::render::{PASS_SAMPLES, RenderSettings, TILE};
-use crate::scene::Scene;
-
-/// Bytes per pixel that a render keeps until its image is written: the tile results
-/// ([`crate::render::adaptive::PixelEstimate`]), the film (linear RGB), the sample counts and
-/// the encoded output (8-bit RGB plus the PNG; an EXR needs twice the film), and the
-/// sample-rate image with `-a`.
-pub fn render_bytes_per_pixel(settings: &RenderSettings, exr: bool) -> u64 {
-    let estimate = std::mem::size_of::<crate::render::adaptive::PixelEstimate>();
-    let film = std::mem::size_of::<crate::math::Vec3>();
-    let output = if exr { 2 * film } else { 3 + 3 };
-    let rate = if settings.adaptive.is_some() { film + 3 + 3 } else { 0 };
-    (estimate + film + std::mem::size_of::<u32>() + output + rate) as u64
-}
-
-/// Bytes a render of `settings` on `threads` threads needs beyond the scene: every pixel
-/// ([`render_bytes_per_pixel`]) plus each thread's tile and wavefront buffers (bounded by
-/// [`PASS_SAMPLES`] and the wavefront's wave size, whatever the sample count; counted for the
-/// light samples of one area light per shading point).
-pub fn render_bytes(settings: &RenderSettings, threads: usize, exr: bool) -> u64 {
-    let pixels = settings.width as u64 * settings.height as u64;
-    let paths = TILE * TILE * PASS_SAMPLES.min(settings.samples_per_pixel.max(1)) as usize;
-    let tile = crate::render::wavefront::worker_bytes(paths, settings.light_samples.max(1) as usize)
-        + (paths * std::mem::size_of::<u32>()) as u64;
-    pixels.saturating_mul(render_bytes_per_pixel(settings, exr)).saturating_add((threads as u64).saturating_mul(tile))
-}
-
-/// Bytes per primary ray that `raypack bench` holds at once: the three ray sets (primary,
-/// diffuse bounces, shadow rays), the reference hits they are made from, and the reference
-/// and timed outputs.
-pub const BENCH_BYTES_PER_PIXEL: u64 =
-    (3 * std::mem::size_of::<crate::Ray>() + 3 * std::mem::size_of::<crate::Hit>()) as u64;
+//! The system's resources, probed, and allocation helpers: the memory this process may still
+//! allocate ([`available`], and [`check_fits`], which refuses a size whose buffers cannot fit
+//! up front instead of aborting minutes later), what it used at its peak
+//! ([`peak_resident_bytes`], [`PeakResident`]), the size of the CPU's last-level cache, and
+//! vectors whose pages the kernel backs with huge pages. What a render, a bench or a scene
+//! needs is estimated where they are defined ([`crate::render::render_bytes`],
+//! [`crate::raysets::BENCH_BYTES_PER_PIXEL`], [`crate::scene::footprint`]).
 
 /// An image (or ray set) whose buffers cannot fit in the memory this process may allocate:
 /// what it needs, what there is, and the largest size of the same shape that fits. Its
@@ -73,32 +39,6 @@ pub fn check_fits(width: usize, height: usize, needed: u64, per_pixel: u64) -> R
     let scale = (available.bytes as f64 / needed as f64).sqrt();
     let fits = (((width as f64 * scale) as usize).max(1), ((height as f64 * scale) as usize).max(1));
     Err(Shortfall { needed, per_pixel, available, fits })
-}
-
-/// Bytes per primitive (triangle or sphere) a scene needs at its peak while it is loaded and
-/// built: the parsed file's vertices and indices, the committed store and the builder's
-/// temporaries. Measured with `raypack info FILE --quality medium` (the process's peak
-/// resident memory over the triangles): 123 on a COLLADA file of 213 KB instanced to 5.0 M
-/// triangles, 122 on the Stanford dragon's PLY (871 k); rounded up.
-pub const SCENE_BYTES_PER_PRIMITIVE: u64 = 128;
-
-/// The memory a scene may need without the user asking for more (`--max-primitives`): 512 MiB
-/// (4 M primitives), or [`DEFAULT_SCENE_BYTES_PER_FILE_BYTE`] per byte of its file when that is
-/// more. A file that is not instanced holds at most about one primitive per byte (an OBJ
-/// face line or a PLY polygon costs a byte or more per triangle), so only COLLADA instancing
-/// meets this cap: a 292 KB file that expands to 11.4 M triangles (1.3 GB) must ask.
-pub const DEFAULT_SCENE_BYTES: u64 = 512 << 20;
-/// See [`DEFAULT_SCENE_BYTES`]: four primitives per byte of the file.
-pub const DEFAULT_SCENE_BYTES_PER_FILE_BYTE: u64 = 4 * SCENE_BYTES_PER_PRIMITIVE;
-
-/// The most primitives a scene file of `file_bytes` bytes may make without `--max-primitives`
-/// (the CLI's default cap): what [`DEFAULT_SCENE_BYTES`] allows for its size, and never more
-/// than fits in the memory this process may allocate ([`available`]), as `-r` is refused
-/// when its buffers cannot fit.
-pub fn default_max_primitives(file_bytes: u64) -> u64 {
-    let budget = DEFAULT_SCENE_BYTES.max(file_bytes.saturating_mul(DEFAULT_SCENE_BYTES_PER_FILE_BYTE));
-    let budget = available().map_or(budget, |a| budget.min(a.bytes));
-    budget / SCENE_BYTES_PER_PRIMITIVE
 }
 
 /// How much memory this process may still allocate, and what says so.
@@ -224,20 +164,6 @@ fn parse_cache_size(s: &str) -> Option<u64> {
     digits.parse::<u64>().ok()?.checked_mul(unit)
 }
 
-/// Bytes of a committed scene's geometry store: vertex positions and normals, indices,
-/// per-triangle materials and spheres (materials, lights and camera excluded).
-pub fn store_bytes(scene: &Scene) -> usize {
-    let t = &scene.triangles;
-    let s = &scene.spheres;
-    std::mem::size_of_val(t.positions.as_slice())
-        + std::mem::size_of_val(t.normals.as_slice())
-        + std::mem::size_of_val(t.indices.as_slice())
-        + std::mem::size_of_val(t.material.as_slice())
-        + std::mem::size_of_val(s.center.as_slice())
-        + std::mem::size_of_val(s.radius.as_slice())
-        + std::mem::size_of_val(s.material.as_slice())
-}
-
 /// Peak resident set size of this process (`VmHWM` of `/proc/self/status`). Linux only:
 /// `None` elsewhere or when the file cannot be read.
 pub fn peak_resident_bytes() -> Option<u64> {
@@ -321,27 +247,6 @@ pub fn human(bytes: u64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn render_estimate_grows_with_pixels_not_samples() {
-        let small = RenderSettings { width: 16, height: 16, samples_per_pixel: 1, ..RenderSettings::default() };
-        let many = RenderSettings { samples_per_pixel: u32::MAX, adaptive: Some((u32::MAX, 0.05)), ..small.clone() };
-        // Two workers' wavefronts of a 16-sample pass (4096 paths each): under 1 MB apiece.
-        assert!(render_bytes(&many, 2, false) < 2 << 20, "{}", render_bytes(&many, 2, false));
-        let huge = RenderSettings { width: 32768, height: 32768, ..small };
-        let bytes = render_bytes(&huge, 2, false);
-        assert!(bytes > 60_000_000_000 && bytes < 100_000_000_000, "{}", human(bytes));
-    }
-
-    #[test]
-    fn the_default_primitive_cap_grows_with_the_file_within_the_memory_available() {
-        let fits = available().map_or(u64::MAX, |a| a.bytes / SCENE_BYTES_PER_PRIMITIVE);
-        let floor = DEFAULT_SCENE_BYTES / SCENE_BYTES_PER_PRIMITIVE;
-        assert_eq!(default_max_primitives(0), floor.min(fits));
-        assert_eq!(default_max_primitives(1000), floor.min(fits));
-        assert_eq!(default_max_primitives(10 << 20), (40u64 << 20).min(fits));
-        assert_eq!(default_max_primitives(u64::MAX / 2), (u64::MAX / SCENE_BYTES_PER_PRIMITIVE).min(fits));
-    }
 
     #[test]
     fn proc_fields_parse() {
