@@ -94,11 +94,7 @@ pub fn available() -> Option<Available> {
 /// (Arrays that outlive the build are [`crate::bvh::BvhArray`]s, whose `zeroed` maps and
 /// advises their own memory.)
 //
-// On the builder's temporaries (primitive references, slots, binary nodes, leaf ids, collapse
-// plans), Intel Xeon (model 167), 2 threads, `raypack bench --build-runs 7 --against embree`,
-// three rounds at each of AVX-512 and AVX2, medians: the Stanford dragon's commit 0.166-0.177 s
-// before, 0.156-0.175 s after (Embree MEDIUM 0.156-0.207 s in the same runs); the 2M knot
-// 0.365-0.383 s before, 0.337-0.354 s after (Embree 0.335-0.346 s).
+// It made commits faster (PERFORMANCE.md, "Builder").
 pub(crate) fn advise_huge_pages<T>(v: &Vec<T>) {
     #[cfg(target_os = "linux")]
     {

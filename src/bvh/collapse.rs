@@ -26,7 +26,7 @@
 //! (A little past 600 lines: the dynamic program, its decisions' encoding and the emission of
 //! nodes and blocks that replays them are one algorithm.)
 
-use crate::bvh::build_sah::pad_outward;
+use crate::bvh::build::pad_outward;
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
 use crate::bvh::{Bvh2, Bvh2Node, Bvh8, BvhArray};
 use crate::geometry::{Sphere4, TriBlock, TriangleTest};

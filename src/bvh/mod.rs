@@ -1,7 +1,7 @@
 //! Bounding volume hierarchies. The BVH layer knows boxes and primitive ids, never
 //! materials or shading.
 //!
-//! * [`build_sah`] builds a binary BVH ([`Bvh2`]) with a binned surface area heuristic.
+//! * [`build`] builds a binary BVH ([`Bvh2`]) with a binned surface area heuristic.
 //! * [`Bvh2`] is also the scalar reference traversal that faster kernels are tested against.
 //! * [`collapse()`] turns it into the 8-wide [`Bvh8`] ([`Bvh8Node`], SoA leaf blocks) that the
 //!   SIMD kernels of [`traverse1`] (single rays), [`traverse_interleaved`] (single rays,
@@ -11,7 +11,7 @@
 //!   and counting their work through [`counters`].
 
 pub mod array;
-pub mod build_sah;
+pub mod build;
 pub mod bvh2;
 pub mod bvh8;
 pub mod collapse;
@@ -20,7 +20,6 @@ pub mod frustum;
 pub mod limits;
 pub mod node;
 pub mod queries;
-pub mod spatial;
 pub mod stats;
 pub mod traverse1;
 pub mod traverse_interleaved;
@@ -28,9 +27,7 @@ pub mod traverse_packet;
 pub mod validate;
 
 pub use array::BvhArray;
-pub use build_sah::{
-    BuildOptions, BuildPrim, BuildQuality, SplitMethod, build_bvh2, build_bvh2_kinds, build_bvh2_spatial,
-};
+pub use build::{BuildOptions, BuildPrim, BuildQuality, SplitMethod, build_bvh2, build_bvh2_kinds, build_bvh2_spatial};
 pub use bvh2::{Bvh2, Bvh2Node};
 pub use bvh8::{Bvh8, Bvh8Stats, DefaultTriBlock};
 pub use collapse::{CollapseMethod, CollapseOptions, PrimShape, collapse, collapse_for};

@@ -144,7 +144,7 @@ impl<V: Lanes> Ray1<V> {
     /// `-0.0` against an entry of `+0.0` (a miss for the integers, a hit for the floats), is a
     /// box the ray leaves exactly at its origin (the subtraction is exact when it gives zero),
     /// where no hit can lie, not even one at `t = 0`: node boxes are padded outward
-    /// ([`crate::bvh::build_sah::pad_outward`]), so every primitive lies strictly inside its
+    /// ([`crate::bvh::build::pad_outward`]), so every primitive lies strictly inside its
     /// box and no point of it on the box's boundary.
     // Callgrind cannot see latency; wall clock, CS184 beetle diffuse rays, single-ray kernel
     // on AVX2, 1 thread: see the commit that made it.

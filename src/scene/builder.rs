@@ -402,7 +402,7 @@ impl Filtered {
         let Filtered { triangles, spheres, materials, lights, camera } = self;
         let nt = triangles.len();
         debug_assert_eq!(prims.len(), nt + spheres.len());
-        // High quality cuts triangles that overlap badly (spatial splits, `bvh::spatial`).
+        // High quality cuts triangles that overlap badly (spatial splits, `bvh::build::spatial`).
         let spatial =
             opts.quality == BuildQuality::High && opts.spatial_split_budget > 0.0 && opts.split == SplitMethod::Sah;
         // The builder finds the union of the primitives' boxes, the scene's bounds.

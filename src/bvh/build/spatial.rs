@@ -12,7 +12,7 @@
 //!
 //! Invariants the builder relies on:
 //! * A reference's box is the exact bounds of the part of its triangle inside it (up to
-//!   rounding, which the node boxes' [`crate::bvh::build_sah::pad_outward`] covers), so the
+//!   rounding, which the node boxes' [`super::pad_outward`] covers), so the
 //!   boxes of all references to a triangle together hold the whole triangle: a ray that hits
 //!   it passes through a leaf that holds it, before or at the hit.
 //! * Every primitive carries a budget of splits (in `BuildPrim`'s spare lane): large ones
@@ -20,7 +20,7 @@
 //!   every sphere) is never cut, so the number of references stays bounded besides the
 //!   free space the builder reserves.
 
-use crate::bvh::build_sah::BuildPrim;
+use super::BuildPrim;
 use crate::math::{Aabb, Vec3};
 
 /// Slabs per axis of the spatial binning (Embree uses 16).
