@@ -70,7 +70,7 @@ proptest! {
         let rays: Vec<Ray> = jitter.iter().map(|j| Ray::new(origin + *j * ojit, base + *j * spread)).collect();
         prop_assume!(rays.iter().all(|r| r.is_valid()));
         let p = PacketRays::<F32x16>::new(&rays, 0xFFFF);
-        let Some(fr) = Frustum::<F32x8>::new(std::slice::from_ref(&p)) else { return Ok(()) };
+        let Some(fr) = Frustum::<F32x8>::new(&p.org, &p.inv, p.tnear, p.tfar, p.active) else { return Ok(()) };
         let mut block = Tri8::EMPTY;
         for (i, t) in tris.iter().enumerate() {
             block.set(i, t[0], t[1], t[2], i as u32);
@@ -196,7 +196,7 @@ proptest! {
         prop_assume!(rays.iter().all(|r| r.is_valid()));
         let p = PacketRays::<F32x16>::new(&rays, 0xFFFF);
         let n = node_with(&boxes);
-        let fr = Frustum::<F32x8>::new(std::slice::from_ref(&p));
+        let fr = Frustum::<F32x8>::new(&p.org, &p.inv, p.tnear, p.tfar, p.active);
         for (i, b) in boxes.iter().enumerate() {
             let (m, _) = p.intersect_box(&n, i);
             let m = m.bitmask();

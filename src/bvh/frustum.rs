@@ -10,7 +10,6 @@ use crate::bvh::bvh2::SLAB_WIDEN;
 use crate::bvh::bvh8::Bvh8Ref;
 use crate::bvh::node::Bvh8Node;
 use crate::bvh::node::{LeafKind, NodeRef};
-use crate::bvh::traverse_packet::PacketRays;
 use crate::geometry::{TriBlock, TriangleTest};
 use crate::math::Vec3;
 use crate::simd::{IsaLanes, Lanes, Vec3x};
@@ -35,40 +34,35 @@ pub struct Frustum<V> {
 }
 
 impl<V: Lanes> Frustum<V> {
-    /// The frustum of the active lanes of `packets`, or `None` when no lane is active or the
-    /// direction signs differ on some axis.
+    /// The frustum of the rays in the `active` (all-ones) lanes of a packet given as rows:
+    /// origins `org`, safe reciprocal directions `inv` and the interval `[tnear, tfar]`; `None`
+    /// when no lane is active or the direction signs differ on some axis.
     ///
     /// Per axis with reciprocal directions in `[i_lo, i_hi]` (same sign) and origins in
     /// `[o_lo, o_hi]`: the near plane `n` is entered no earlier than `(n - o') · i'` where
     /// `o'` is the origin bound on the far side (`o_hi` for positive directions) and `i'` the
     /// reciprocal of smallest magnitude; the far plane `f` is left no later than
     /// `(f - o'') · i''` with the other bounds. Rounding is monotone in each operand, so these
-    /// bound the per-ray values computed by [`PacketRays::intersect_box`] and
-    /// [`crate::bvh::traverse1::Ray1::intersect_node`] in floating point too. A negative
-    /// bound is not tight, but the interval starts at `tnear >= 0`, which makes it harmless.
+    /// bound the per-ray values computed by the packet kernels' box test
+    /// ([`crate::bvh::traverse_packet`]) and [`crate::bvh::traverse1::Ray1::intersect_node`]
+    /// in floating point too. A negative bound is not tight, but the interval starts at
+    /// `tnear >= 0`, which makes it harmless.
     #[inline(always)]
-    pub fn new<W: Lanes>(packets: &[PacketRays<W>]) -> Option<Self> {
+    pub fn new<W: Lanes>(org: &Vec3x<W>, inv: &Vec3x<W>, tnear: W, tfar: W, active: W) -> Option<Self> {
         debug_assert_eq!(V::LANES, 8, "one lane per child slot");
+        if active.bitmask() == 0 {
+            return None;
+        }
         let (pinf, ninf) = (W::splat(f32::INFINITY), W::splat(f32::NEG_INFINITY));
         let mut lo = [pinf; 7];
         let mut hi = [ninf; 7];
-        let mut any = false;
-        for p in packets {
-            if p.active.bitmask() == 0 {
-                continue;
-            }
-            any = true;
-            let rows = [p.org.x, p.org.y, p.org.z, p.inv.x, p.inv.y, p.inv.z];
-            for (k, row) in rows.iter().enumerate() {
-                lo[k] = lo[k].vmin(p.active.select(*row, pinf));
-                hi[k] = hi[k].vmax(p.active.select(*row, ninf));
-            }
-            lo[6] = lo[6].vmin(p.active.select(p.tnear, pinf));
-            hi[6] = hi[6].vmax(p.active.select(p.tfar, ninf));
+        let rows = [org.x, org.y, org.z, inv.x, inv.y, inv.z];
+        for (k, row) in rows.iter().enumerate() {
+            lo[k] = lo[k].vmin(active.select(*row, pinf));
+            hi[k] = hi[k].vmax(active.select(*row, ninf));
         }
-        if !any {
-            return None;
-        }
+        lo[6] = lo[6].vmin(active.select(tnear, pinf));
+        hi[6] = hi[6].vmax(active.select(tfar, ninf));
         let (mut lo1, mut hi1) = ([0.0f32; 7], [0.0f32; 7]);
         for k in 0..7 {
             (lo1[k], hi1[k]) = (lo[k].reduce_min(), hi[k].reduce_max());

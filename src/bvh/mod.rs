@@ -24,6 +24,7 @@ pub mod stats;
 pub mod traverse1;
 pub mod traverse_interleaved;
 pub mod traverse_packet;
+pub mod tuning;
 pub mod validate;
 
 pub use array::BvhArray;

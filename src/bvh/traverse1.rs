@@ -291,11 +291,11 @@ fn speculated_slot(i: usize) -> usize {
 }
 
 /// The slot to descend to: through [`speculated_slot`]'s predicted branches when the caller
-/// asks for it (`SPECULATE`) and the tier takes it ([`IsaLanes::SPECULATE_DESCENT`]: not the
-/// baseline tier), else `i` as it is.
+/// asks for it (`SPECULATE`) and the tier takes it ([`crate::bvh::tuning::speculate_descent`]:
+/// not the baseline tier), else `i` as it is.
 #[inline(always)]
 fn descent_slot<I: IsaLanes, const SPECULATE: bool>(i: usize) -> usize {
-    if SPECULATE && I::SPECULATE_DESCENT { speculated_slot(i) } else { i }
+    if SPECULATE && const { crate::bvh::tuning::speculate_descent(I::ISA) } { speculated_slot(i) } else { i }
 }
 
 impl<T: TriBlock> Bvh8Ref<'_, T> {

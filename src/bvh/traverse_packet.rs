@@ -300,7 +300,7 @@ impl<V: Lanes> PacketRays<V> {
 
 /// The switch threshold of packets without a frustum (direction signs that differ): `3K/8`
 /// rays (6 of 16, 3 of 8), except 16-lane packets on AVX-512, which go on alone at 4
-/// ([`IsaLanes::INCOHERENT_THRESHOLD_16`]). Coherent packets keep
+/// ([`crate::bvh::tuning::incoherent_threshold_16`]). Coherent packets keep
 /// [`crate::bvh::queries::HYBRID_THRESHOLD`].
 //
 // Measured on the Stanford dragon's diffuse bounces (137k rays, Ice Lake-SP, AVX2, 16-ray
@@ -308,7 +308,7 @@ impl<V: Lanes> PacketRays<V> {
 // 12 = 1.85 / 2.19 / 2.37 / 2.21 / 2.10 (medians 1.78 / 1.88 / 2.07 / 2.11 / 1.95).
 #[inline(always)]
 pub fn incoherent_threshold<V: Lanes, I: IsaLanes>() -> usize {
-    if V::LANES == 16 { I::INCOHERENT_THRESHOLD_16 } else { 3 * V::LANES / 8 }
+    if V::LANES == 16 { const { crate::bvh::tuning::incoherent_threshold_16(I::ISA) } } else { 3 * V::LANES / 8 }
 }
 
 /// Hybrid closest-hit traversal of the active lanes of `rays`, in ISA `I` with triangle
@@ -334,7 +334,7 @@ pub fn intersect_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C
         return;
     }
     let pre = P::ray_k(&rays.org, &rays.dir);
-    let frustum = Frustum::<I::F8>::new(std::slice::from_ref(rays));
+    let frustum = Frustum::<I::F8>::new(&rays.org, &rays.inv, rays.tnear, rays.tfar, rays.active);
     // Rays whose direction signs differ (no frustum) are incoherent: they split up early, so
     // they go on alone sooner (Embree's incoherent switch threshold is higher too).
     let threshold = if frustum.is_none() { threshold.max(incoherent_threshold::<V, I>()) } else { threshold };
@@ -520,7 +520,7 @@ pub fn occluded_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C:
             return occluded;
         }
     }
-    let frustum = Frustum::<I::F8>::new(std::slice::from_ref(rays));
+    let frustum = Frustum::<I::F8>::new(&rays.org, &rays.inv, rays.tnear, rays.tfar, rays.active);
     let mut refs = [const { MaybeUninit::<NodeRef>::uninit() }; BVH8_STACK];
     let mut masks = [const { MaybeUninit::<u32>::uninit() }; BVH8_STACK];
     let mut sp = 0usize;

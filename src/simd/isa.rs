@@ -192,16 +192,6 @@ pub trait IsaLanes: Copy + Send + Sync + 'static {
     /// The packet lanes of the stream queries ([`crate::Scene::intersect_batch`] and kin):
     /// `F16` or `F8`, whichever traces faster on this tier (see [`crate::bvh::queries`]).
     type Stream: Lanes;
-    /// How few of a 16-ray packet's rays without a common direction octant still want a
-    /// subtree when they finish it one by one
-    /// ([`crate::bvh::traverse_packet::incoherent_threshold`]).
-    const INCOHERENT_THRESHOLD_16: usize;
-    /// Whether the single-ray kernels take the slot they descend to through predicted
-    /// branches ([`crate::bvh::traverse1`]; the closest-hit query only in small trees,
-    /// [`crate::bvh::queries::SPECULATION_MAX_BYTES`]). Not on the baseline tier, where a
-    /// crate that depends on raypack got less of the gain than the project's own build
-    /// (PERFORMANCE.md, "Descent slots as predicted branches").
-    const SPECULATE_DESCENT: bool;
 }
 
 /// The baseline tier's lanes (`wide`'s types). Also usable directly: it needs no CPU check.
@@ -214,8 +204,6 @@ impl IsaLanes for Baseline {
     type F8 = F32x8;
     type F16 = F32x16;
     type Stream = F32x16;
-    const INCOHERENT_THRESHOLD_16: usize = 6;
-    const SPECULATE_DESCENT: bool = false;
 }
 
 /// The AVX2 tier's lanes.
@@ -230,8 +218,6 @@ impl IsaLanes for Avx2 {
     type F8 = super::x86::M256;
     type F16 = super::x86::Pair<super::x86::M256>;
     type Stream = super::x86::Pair<super::x86::M256>;
-    const INCOHERENT_THRESHOLD_16: usize = 6;
-    const SPECULATE_DESCENT: bool = true;
 }
 
 /// The AVX-512 tier's lanes.
@@ -246,10 +232,6 @@ impl IsaLanes for Avx512 {
     type F8 = super::x86::M256;
     type F16 = super::x86::M512;
     type Stream = super::x86::M512;
-    // 4 against 6: diffuse streams 1-4% faster on all four scenes measured, AVX2 no
-    // better with 4 (PERFORMANCE.md, "Streams").
-    const INCOHERENT_THRESHOLD_16: usize = 4;
-    const SPECULATE_DESCENT: bool = true;
 }
 
 /// A kernel invocation, run with the lanes of one ISA tier. `run` and everything it calls
