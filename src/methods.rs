@@ -19,8 +19,7 @@ use rayon::prelude::*;
 pub const CHUNK: usize = 1024;
 
 /// Most threads a thread count may ask for, per logical CPU: more only costs thread starts
-/// (`-t 2000` took 5 s to render 16×12 pixels on 2 CPUs, `threads=100000` in Python did not
-/// return in two minutes) and gains nothing.
+/// and gains nothing (a huge count stalls a render for seconds before its first pixel).
 pub const THREADS_PER_CPU: usize = 8;
 
 /// A thread count above [`max_threads`] (or zero).
@@ -156,8 +155,8 @@ pub fn output_for(run: &Run<'_>, n: usize) -> Output {
 
 /// Traces `rays` with `run` into `out` on the current rayon pool, in contiguous chunks of
 /// [`CHUNK`] rays, each chunk a rayon task of its own (as [`Scene::intersect_stream`] does:
-/// with rayon's default split, a thread's last large task could leave the other idle, which
-/// cost two threads up to 19% on diffuse rays; PERFORMANCE.md, "Work split over threads").
+/// with rayon's default split, a thread's last large task could leave the other idle;
+/// PERFORMANCE.md, "Work split over threads").
 ///
 /// # Panics
 /// When `out` is of the other query kind or shorter than `rays`.

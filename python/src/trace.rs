@@ -125,11 +125,7 @@ pub fn intersect(target: Target<'_>, rays: &[Ray], out: HitArrays<'_>) {
                 let hit_buf = &mut hit_buf[..ray_buf.len()];
                 target.scene.intersect_batch(ray_buf, hit_buf);
                 // The normals below read each hit triangle's corners: fetched for the whole
-                // chunk first. Stanford dragon (871k triangles), 1M diffuse rays
-                // (tools/bench-python.py's set), Zen 4, AVX-512, 1 thread, `perf record` of
-                // `Scene.intersect`: this loop took 12.2% and 13.7% of the kernel's samples
-                // in two runs without it, 7.7% and 9.1% with it (fetching 16 or 64 rays ahead
-                // inside the loop instead: 8.3%, 8.6%).
+                // chunk first (PERFORMANCE.md, "Hit geometry prefetch").
                 target.scene.prefetch_hits(hit_buf);
                 let outs = t
                     .iter_mut()

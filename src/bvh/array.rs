@@ -53,8 +53,9 @@ impl<T: bytemuck::Pod> View<T> {
         Self { ptr: std::ptr::NonNull::from(s).cast(), len: s.len() }
     }
 
-    /// The elements. Beetle diffuse rays, callgrind, `Scene::intersect1` on AVX2: 863 -> 822
-    /// instructions per ray against casting at every access.
+    /// The elements, from the cast made once when the view was made: casting at every
+    /// access cost the single-ray kernel instructions (PERFORMANCE.md, "Smaller measured
+    /// choices").
     #[inline(always)]
     fn slice(&self) -> &[T] {
         // SAFETY: `ptr` and `len` describe the cast of the mapping's bytes made in `View::of`;
@@ -88,10 +89,8 @@ impl<T: bytemuck::Pod> BvhArray<T> {
             Ok(map) if bytes > 0 => {
                 // Transparent huge pages where the system allows them (a hint; errors are
                 // ignored): incoherent rays touch the BVH all over, and with 4 KiB pages a
-                // 60 MB tree misses the TLB on most node visits. Embree advises the same on its
-                // BVH memory. Stanford dragon (871k triangles, 58 MB of BVH), Ice Lake-SP,
-                // AVX2, 1 thread, 5 interleaved runs, median Mrays/s: diffuse rays
-                // single-ray 1.92 -> 2.15, shadow rays 2.64 -> 2.76.
+                // large tree misses the TLB on most node visits. Embree advises the same on its
+                // BVH memory (PERFORMANCE.md, "Smaller measured choices").
                 let _ = map.advise(memmap2::Advice::HugePage);
                 let view = View::of(&map[..bytes]);
                 Self { repr: Repr::Anon { map, len, view } }

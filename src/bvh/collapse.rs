@@ -15,9 +15,8 @@
 //! Binary leaves are atomic (never split), so leaves hold at most `max(binary leaf size,
 //! max_leaf_prims)` primitives. The triangle leaves of one node that fit in a block share
 //! blocks: they are placed first fit in decreasing order of size, each in lanes of its own
-//! ([`NodeRef::leaf_in_block`]), which fills the Stanford dragon's blocks to 80% instead of
-//! 67% and its BVH8 takes 49 MB instead of 58 MB (PERFORMANCE.md, "Leaf blocks shared by a
-//! node's small leaves"). A binary leaf holding both triangles and spheres is split by
+//! ([`NodeRef::leaf_in_block`]), which leaves fewer padding lanes and a smaller BVH8
+//! (PERFORMANCE.md, "Leaf blocks shared by a node's small leaves"). A binary leaf holding both triangles and spheres is split by
 //! kind into two leaves first (their padded boxes stay inside the parent's, because
 //! [`pad_outward`] is monotone); the scene's builder makes no such leaves. The greedy
 //! alternative (repeatedly open the child of largest area, as Embree's BVH8 builder does) is

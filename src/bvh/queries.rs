@@ -2,6 +2,9 @@
 //! instantiates per ISA tier, and that picks the triangle kernel `P` of the BVH's layout
 //! ([`TriangleTest`]) once per call.
 //!
+//! (One file past 600 lines with its unit tests: the entry points are one table of `IsaOp`s
+//! that share the dispatch and the choice of triangle kernel, and the tests compare them.)
+//!
 //! | query | kernel | rays per call |
 //! |---|---|---|
 //! | [`Bvh8::intersect1_with`], [`Bvh8::occluded1_with`] | [`crate::bvh::traverse1`] | one |
@@ -30,9 +33,9 @@ use crate::simd::{Isa, IsaLanes, Lanes};
 pub const HYBRID_THRESHOLD: usize = 1;
 
 /// Inner nodes a cone query ([`Bvh8::cone_may_hit_with`]) visits at most before it answers
-/// "may hit". On the Stanford dragon's camera (480 × 360 pixels, one cone per pixel) a budget
-/// of 16 nodes already culls the same pixels as an unlimited one but for 0.02% of them, at the
-/// same time; the budget bounds the cost of cones that brush many boxes and no triangle.
+/// "may hit": a small budget already culls nearly the pixels an unlimited one does
+/// (PERFORMANCE.md, "Pixels whose camera rays cannot hit the scene"), and the budget bounds
+/// the cost of cones that brush many boxes and no triangle.
 pub const CONE_NODE_BUDGET: usize = 64;
 
 /// Runs `$body` with the type `$p` set to the triangle kernel of `$test`.
@@ -59,12 +62,8 @@ macro_rules! with_kernel {
 /// camera rays. On the diffuse rays of larger trees the guesses fail at the deep levels, and
 /// each wrong one costs a flush and starts a load the ray does not need. The bound is a
 /// property of the tree, not of the machine, and hits are the same bit for bit either way.
-/// Measured on an Intel Xeon (Emerald Rapids, AVX2, diffuse rays, `Scene::intersect1` over
-/// `rtcIntersect1`, with and without speculation): better with it on the CS184 beetle (0.4
-/// MB), level on the CS184 building (2.2 MB), worse by 5-14% on every one of eleven meshes
-/// from 2.7 MB (the 48k-triangle Stanford dragon) to 111 MB (a 2M-triangle knot), and by
-/// 10-30% on the 871k-triangle dragon at AVX-512. The bound lies between the building and
-/// the small dragon; PERFORMANCE.md, "Descent slots as predicted branches".
+/// The bound lies between the smallest tree where speculation lost and the largest where it
+/// did not (PERFORMANCE.md, "Descent slots as predicted branches").
 pub const SPECULATION_MAX_BYTES: usize = 5 << 19;
 
 struct Intersect1<'a, T: TriBlock, C> {

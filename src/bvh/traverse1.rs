@@ -1,6 +1,9 @@
 //! Single-ray traversal of the 8-wide BVH: one ray against the eight child boxes of a node
 //! per step, closest hit (`intersect1`) and any hit (`occluded1`).
 //!
+//! (One file past 600 lines with its unit tests: the two kernels, the node test and the
+//! descent and push steps they and the interleaved kernels share, which inline into each other.)
+//!
 //! The node test is Embree's (Wald et al., "Embree: A Kernel Framework for Efficient CPU Ray
 //! Tracing", 2014; for 8 lanes Fuetterling et al., "Accelerated Single Ray Tracing for Wide
 //! Vector Units", HPG 2017): the ray's direction signs pick, once per ray, which row of the
@@ -14,12 +17,9 @@
 //! wait for the box test that picks it. The any-hit kernel does not sort: it visits hit
 //! children from the highest slot down, which tests a node's leaves before its subtrees.
 //!
-// Measured against visiting hit children in slot order (no sorting; 1 thread, best of 9,
-// Mrays/s, Embree's `rtcIntersect1` in the same process for scale): on the Stanford dragon
-// camera rays 10.1 unsorted against 18.4 sorted (Embree 14.4), diffuse bounces 2.17 against
-// 2.58 (Embree 2.90 / 2.51 in the two runs); on the CS184 beetle, which fits in cache,
-// 23.6 against 24.3. The static per-octant child order of Fuetterling et al. (no sorting at
-// run time, an order table per node) was not tried: the 256-byte node has no room for the
+// Nearest first beat visiting hit children in slot order (PERFORMANCE.md, "Smaller measured
+// choices"). The static per-octant child order of Fuetterling et al. (no sorting at run
+// time, an order table per node) was not tried: the 256-byte node has no room for the
 // tables without narrowing the child references.
 //
 // The any-hit kernel's order (leaves first, from the highest slot down) against the lowest
@@ -131,7 +131,7 @@ impl<V: Lanes> Ray1<V> {
     /// same number of roundings (subtraction, reciprocal, the factor's product, the plane's
     /// product), so the same guarantee, and one dependent multiplication fewer per node. With
     /// the four-operand minimum and maximum as two levels each, the test's critical path is
-    /// 16 cycles of latency on AVX2 instead of 24 (Ice Lake: 4 per add, mul, min, max).
+    /// four dependent operations instead of six.
     ///
     /// On AVX2 and above ([`Lanes::INT_ORDER`]) the maximum, minimum and comparison read the
     /// distances' bits as integers ([`Lanes::max_bits`]: `vpmaxsd`, `vpminsd`, `vpcmpgtd`, one
@@ -146,16 +146,11 @@ impl<V: Lanes> Ray1<V> {
     /// where no hit can lie, not even one at `t = 0`: node boxes are padded outward
     /// ([`crate::bvh::build::pad_outward`]), so every primitive lies strictly inside its
     /// box and no point of it on the box's boundary.
-    // Callgrind cannot see latency; wall clock, CS184 beetle diffuse rays, single-ray kernel
-    // on AVX2, 1 thread: see the commit that made it.
-    //
     // Tried and not kept: the fused form `t = plane * inv - org * inv` (one FMA per plane
-    // instead of a subtraction and a multiplication, as Embree's non-robust kernel does).
-    // On the Stanford dragon (1 thread, 9 interleaved runs, median Mrays/s) it gained 2-4%
-    // (camera rays in 16-ray packets 32.0 against 31.5, diffuse 2.79 against 2.69, shadow 7.98
-    // against 7.63), but the rounding of `org * inv` grows with the distance of the origin
-    // from the scene and would eat the 2^-20 relative padding of the node boxes for origins
-    // more than about 16 scene extents away, making hits near node faces go missing.
+    // instead of a subtraction and a multiplication, as Embree's non-robust kernel does). It
+    // was a little faster, but the rounding of `org * inv` grows with the distance of the
+    // origin from the scene and would eat the 2^-20 relative padding of the node boxes for
+    // origins more than about 16 scene extents away, making hits near node faces go missing.
     // Tried three times since, and it never paid: robust with the per-ray `org * inv` moved
     // outward past its rounding; without that rounding, as the best case; robust with `org *
     // inv` computed exactly in f64 and rounded outward. Slower on the CS184 scenes, even or
@@ -168,8 +163,7 @@ impl<V: Lanes> Ray1<V> {
         // The masks restate the offsets' ranges (see `near`) so that the loads need no bounds
         // checks where the compiler cannot see where the offsets came from: the interleaved
         // kernels keep their rays' constants in memory (in the single-ray kernels, which can,
-        // they cost three instructions per beetle diffuse ray; PERFORMANCE.md, "The single-ray
-        // kernel's set-up").
+        // they cost instructions; PERFORMANCE.md, "The single-ray kernel's set-up").
         let [nx, ny, nz] = [self.near[0] & 8, 16 | self.near[1] & 8, 32 | self.near[2] & 8];
         let tnx = (V::load(&b[nx..]) - self.org.x) * self.inv.x;
         let tny = (V::load(&b[ny..]) - self.org.y) * self.inv.y;
@@ -225,8 +219,6 @@ impl<V: Lanes> Ray1<V> {
 /// test, then only decides the branch between node and leaf, which the processor predicts, and
 /// the next node's address no longer waits for it. One L1 load less on the chain of dependent
 /// latencies that a node step is.
-// Measured (AMD EPYC Zen 4, `raypack bench SCENE --against embree --isa avx2 -t 1 --runs 5
-// --quality medium --methods Scene::intersect1,rtcIntersect1`, interleaved rounds): see
 // PERFORMANCE.md, "Inner children computed, not loaded".
 #[inline(always)]
 pub(crate) fn next_child(node: &Bvh8Node, i: usize) -> NodeRef {
@@ -247,10 +239,7 @@ pub(crate) fn next_child(node: &Bvh8Node, i: usize) -> NodeRef {
 /// The constants are written by `asm!` because LLVM would otherwise fold the branches back
 /// into `i`, which is the data dependency again. (A `match` on `i` became a jump table: one
 /// indirect branch, which predicted worse than the three conditional ones.)
-// Measured (AMD EPYC Zen 4, `raypack bench SCENE --against embree --isa I -t 1 --runs 5
-// --build-runs 1 --quality medium --methods Scene::intersect1,rtcIntersect1,Scene::occluded1,
-// rtcOccluded1`, interleaved rounds): see PERFORMANCE.md, "Descent slots as predicted
-// branches".
+// PERFORMANCE.md, "Descent slots as predicted branches".
 #[inline(always)]
 fn speculated_slot(i: usize) -> usize {
     #[cfg(target_arch = "x86_64")]
@@ -309,9 +298,9 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
     /// The single-ray query sets it in small trees
     /// ([`crate::bvh::queries::SPECULATION_MAX_BYTES`]); the packet kernels' fallback does
     /// not: its rays enter subtrees part-way down, one after the other, where the branch
-    /// history does not tell the slot, and the streams were 2-3% slower with it
-    /// (PERFORMANCE.md, "Descent slots as predicted branches"; the prefetches: "Fewer
-    /// instructions per ray in small trees").
+    /// history does not tell the slot, and the streams were slower with it (PERFORMANCE.md,
+    /// "Descent slots as predicted branches"; the prefetches: "Fewer instructions per ray in
+    /// small trees").
     #[inline(always)]
     pub fn intersect1_from<I: IsaLanes, P: TriangleKernel, C: Counter, const SPECULATE: bool>(
         &self,
@@ -331,8 +320,8 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
         // reference points, so the compiler cannot keep its fields in registers): a hit writes
         // it, and the block test, which needs every vector register, no longer saves and
         // restores `t`, `u` and `v` around each block. `tfar` stays in a register: in memory
-        // too it saved 3 more instructions per ray but cost 2-5% of the wall clock.
-        // Measured: PERFORMANCE.md, "Spills of the single-ray kernel".
+        // too it saved instructions but cost wall clock (PERFORMANCE.md, "Spills of the
+        // single-ray kernel").
         let mut tfar = *tfar_io;
         let hit = std::hint::black_box(hit_io);
         let mut cur = start;
@@ -434,10 +423,9 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
     // `push_below_highest`) are the steps of `intersect1_from` and `occluded1_from` that the
     // interleaved kernels (`crate::bvh::traverse_interleaved`) share. The two fused kernels keep
     // their own inline copies: with them calling these helpers (the same code once inlined), a
-    // crate depending on raypack, built with cargo's default profile, traced at 0.93-0.95 of
-    // the project's build on the baseline tier (`tools/dependent-check`, beetle, SSE2, 5 and 7
-    // rounds, stop 49: `Scene::intersect1` 0.947-0.954, `Scene::occluded1` 0.930-0.932) where it
-    // is at 0.95-1.10 with the kernels as they were: their code layout, not their work.
+    // crate depending on raypack, built with cargo's default profile, traced slower on the
+    // baseline tier, by their code layout, not their work (PERFORMANCE.md, "Incoherent rays
+    // in large trees: several in flight").
 
     /// Prefetches the children of `node` in the slots set in `rest` (from the lowest up), then
     /// the one in slot `i0`.
@@ -482,9 +470,8 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                 // The ray through `black_box`, an optimisation barrier: without it the compiler
                 // hoists the sphere test's constants (the origin, the direction, its square
                 // length and `tnear` in four lanes) out of the traversal loop, and every ray
-                // computes them also in scenes without spheres. Measured (callgrind, the CS184
-                // beetle's diffuse rays at AVX2): 911.5 -> 899.3 instructions per ray;
-                // PERFORMANCE.md, "Fewer instructions per ray in small trees".
+                // computes them also in scenes without spheres (PERFORMANCE.md, "Fewer
+                // instructions per ray in small trees").
                 let ray = std::hint::black_box(r.ray);
                 for block in &self.spheres[range] {
                     let (m, t) = sphere_lanes(

@@ -3,7 +3,7 @@
 //! A single ray's traversal is one chain of dependent loads: a node's address is known only
 //! when its parent's box test is done, and a leaf's blocks only when its node's is. In a tree
 //! that fits the caches each load takes a few cycles; in one that does not (the Stanford
-//! dragon's 49 MB, a 2M-triangle mesh's 111 MB) the ray waits on the L3 and on memory at
+//! dragon's, a 2M-triangle mesh's) the ray waits on the L3 and on memory at
 //! nearly every step, one miss after another. Here [`FLIGHTS`] rays are in flight at once,
 //! each advanced by one step (a node, or a leaf and the pops after it) in turn, and every
 //! step ends by prefetching what its ray visits next: by the time the ray's turn comes again,

@@ -21,10 +21,8 @@
 //! * Leaves test all wanted rays against one broadcast triangle at a time, skipping the
 //!   triangles whose bounding boxes the frustum ([`Frustum`]) misses (8 boxes per test, built from the
 //!   block's `v0`, `e1`, `e2` and padded like node boxes).
-// (Measured on camera rays, 1 thread, best of 9, Mrays/s: the leaf culling took the CS184
-// CBbunny from 57 to 81 (its Cornell-box walls share one 13-triangle leaf whose box is the
-// whole room), the beetle from 76 to 86, the dragon from 32 to 37; on shadow rays in stateless
-// 16-ray packets the CBbunny from 71 to 133.)
+// The leaf culling pays most where a leaf's box is much larger than its triangles'
+// (PERFORMANCE.md, "Smaller measured choices").
 //!
 //! Every lane gets exactly the hit the single-ray kernel gives it: the box tests are
 //! conservative and the triangle test is the same bit-exact one (Möller–Trumbore or
@@ -34,23 +32,11 @@
 //! `I` (8-lane node and frustum tests, the single-ray fallback) and a work [`Counter`] `C`;
 //! [`crate::bvh::queries`] instantiates them per ISA tier.
 //!
-// Tried and replaced (Stanford dragon, 871k triangles, 1024 x 768 camera rays in 4 x 4 tiles,
-// 1 thread, best of 7, Mrays/s; Embree's `rtcIntersect16` with the coherent flag: 27.9):
-// * frustum-only traversal (no per-lane tests at inner nodes, per-lane leaf-box test only)
-//   of one 16-ray packet: 29.8, of tiles of 4 packets (64 rays): 24.1 — the larger frustum
-//   visits more leaves (1.19 packet-leaf visits per ray against 0.23) than it saves in
-//   node tests; the hybrid with prefilter: 32.5.
-// * per-ray leaf tests (each wanted ray against a whole block when fewer rays than
-//   triangles want the leaf): 29.3 against 32.5 without. Leaves are mostly wanted by 1-2 rays
-//   of a packet, but the per-lane broadcast and extraction cost more than the wasted lanes.
-//   For shadow rays: 47.6 against 50.0 on the CS184 beetle, 10.2 against 9.7 on the dragon.
-// * without the frustum prefilter (per-lane tests of every child): camera rays 83.0 against
-//   99.6 on the beetle, 33.1 against 37.2 on the dragon; shadow rays 44.6 against 50.0 and
-//   8.75 against 9.68. Without prefetching hit children: dragon camera rays 28.9 against 37.2,
-//   diffuse 2.86 against 3.63, shadow 7.43 against 9.68 (neutral on the beetle, which fits
-//   in cache).
-// * for shadow rays the frustum-only kernel: 3.86, the hybrid without prefilter: 7.53,
-//   with: 8.12 (Embree's best, `rtcOccluded16`: 5.18).
+// Tried and replaced by the hybrid with the frustum prefilter: frustum-only traversal of
+// one packet or of tiles of packets (the larger frustum visits more leaves than it saves in
+// node tests), per-ray leaf tests (the per-lane broadcast and extraction cost more than the
+// wasted lanes), no prefilter, no prefetching of hit children (PERFORMANCE.md, "Smaller
+// measured choices").
 
 use crate::bvh::BVH8_STACK;
 use crate::bvh::bvh2::SLAB_WIDEN;
@@ -303,9 +289,7 @@ impl<V: Lanes> PacketRays<V> {
 /// ([`crate::bvh::tuning::incoherent_threshold_16`]). Coherent packets keep
 /// [`crate::bvh::queries::HYBRID_THRESHOLD`].
 //
-// Measured on the Stanford dragon's diffuse bounces (137k rays, Ice Lake-SP, AVX2, 16-ray
-// stream, 1 thread, best of 12 interleaved 0.1 s runs, Mrays/s): threshold 1 / 3 / 5 / 8 /
-// 12 = 1.85 / 2.19 / 2.37 / 2.21 / 2.10 (medians 1.78 / 1.88 / 2.07 / 2.11 / 1.95).
+// The threshold is measured (PERFORMANCE.md, "Smaller measured choices").
 #[inline(always)]
 pub fn incoherent_threshold<V: Lanes, I: IsaLanes>() -> usize {
     if V::LANES == 16 { const { crate::bvh::tuning::incoherent_threshold_16(I::ISA) } } else { 3 * V::LANES / 8 }
@@ -451,12 +435,10 @@ pub fn intersect_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C
 /// one test (the "shadow cache" of Haines and Greenberg, "The Light Buffer", IEEE CG&A 1986).
 /// Any hit is as good as another for occlusion, so the answers do not change.
 //
-// On the CS184 CBbunny, whose shadow rays mostly end on the ceiling, it lifts 16-ray packets
-// from 71 to 450 Mrays/s (1 thread); on the beetle from 29 to 35, on the dragon from 6.8 to 7.2.
-//
-// The same cache for closest hits (a hit on the last hit triangle shrinks the rays'
-// intervals before traversal) was tried on camera rays and did not pay: CBbunny 56.2 with
-// against 57.2 without, beetle 76.0 against 76.1, dragon 32.3 against 32.4 Mrays/s.
+// It pays most where one occluder blocks most rays (the CS184 CBbunny's ceiling). The same
+// cache for closest hits (a hit on the last hit triangle shrinks the rays' intervals before
+// traversal) was tried on camera rays and did not pay (PERFORMANCE.md, "Smaller measured
+// choices").
 #[derive(Clone, Copy, Debug, Default)]
 pub struct OccluderCache {
     /// The stored vectors of the last occluder, and the layout they are in.

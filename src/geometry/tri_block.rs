@@ -1,6 +1,9 @@
 //! SoA leaf blocks of M triangles and the SIMD Möller–Trumbore test (Möller & Trumbore,
 //! "Fast, Minimum Storage Ray/Triangle Intersection", JGT 1997) on them.
 //!
+//! (One file past 600 lines with its unit tests: the block layout, the two triangle tests on
+//! it and their kernels are one concept, and the tests check every lane against the scalar twin.)
+//!
 //! A block stores, per lane, the first vertex `v0` and the edges `e1 = v1 - v0`,
 //! `e2 = v2 - v0` as rows of M floats (Embree's `TriangleM` without the precomputed normal:
 //! the normal costs 3 more rows of memory and is 9 cheap lane operations to recompute).
@@ -45,9 +48,7 @@ use crate::simd::{IsaLanes, Lanes, Vec3x};
 /// exact test as well). The filter leaves out what rarely rejects a lane (`U <= |det|`, which
 /// `U + V <= |det|` and `V >= 0` nearly imply; a finite `det`): a lane it lets through is
 /// decided by the exact tests, so fewer conditions only cost a division now and then.
-// Measured (callgrind, the CS184 beetle's diffuse rays at AVX2, `Scene::intersect1`): 919.3
-// -> 911.5 instructions per ray, with the same hits; PERFORMANCE.md, "Fewer instructions per
-// ray in small trees".
+// PERFORMANCE.md, "Fewer instructions per ray in small trees".
 #[inline(always)]
 pub fn moller_trumbore<V: Lanes>(
     origin: &Vec3x<V>,
@@ -70,10 +71,7 @@ pub fn moller_trumbore<V: Lanes>(
 /// `e2` and `q` alive past the filter for that path, the single-ray kernel, short of
 /// registers, stored both to the stack on every block, rejected or not. The packet kernels'
 /// broadcast test keeps the lanes.
-// Measured (callgrind, the CS184 beetle's diffuse rays at AVX2, `Scene::intersect1`): 899.1
-// -> 886.9 instructions per ray, the same hits; the origin passed as a copy, 875.8 -> 859.6
-// (fewer stores per ray); PERFORMANCE.md, "Spills of the single-ray kernel" and "The
-// single-ray kernel's set-up".
+// PERFORMANCE.md, "Spills of the single-ray kernel" and "The single-ray kernel's set-up".
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub(crate) fn moller_trumbore_with<V: Lanes>(
@@ -238,17 +236,11 @@ pub enum TriangleTest {
     MollerTrumbore,
     /// Woop, Benthin and Wald's watertight test ([`crate::geometry::watertight`]): blocks
     /// store the exact vertices `v0`, `v1`, `v2`. No ray slips through a shared edge or vertex.
-    // Cost, measured with `examples/triangle_test_cost.rs` under callgrind (Stanford dragon,
-    // 871k triangles, `raypack bench`'s primary, diffuse and shadow rays at 512 x 384, 265k
-    // rays, one thread, AVX2 build): single-ray kernels 196.0M against 174.2M instructions
-    // (+12.5%), 16-ray packet streams 267.1M against 255.3M (+4.6%). Memory: none (the same
-    // 40 bytes per triangle). The per-ray shear is computed once per ray (packets: per lane,
-    // with lane selects for the axis permutation). Wall clock on the native AVX-512 build
-    // (`raypack bench` on the dragon, 1 thread, two interleaved runs of each): camera rays in
-    // 16-ray packets 27% slower (37.8 / 37.1 against 25.7 / 28.8 Mrays/s), single camera rays
-    // 8%, shadow streams even: the per-lane permutation of each broadcast triangle costs more
-    // there than the instruction count shows. Untried: permuting by scalar index when all
-    // lanes share `kz` and the swap, as coherent packets do.
+    // It costs instructions and, in packets, more wall clock than the instructions show (the
+    // per-lane permutation of each broadcast triangle); no memory (the same 40 bytes per
+    // triangle). The per-ray shear is computed once per ray (packets: per lane, with lane
+    // selects for the axis permutation). PERFORMANCE.md, "Smaller measured choices". Untried:
+    // permuting by scalar index when all lanes share `kz` and the swap, as coherent packets do.
     Watertight,
 }
 

@@ -381,9 +381,8 @@ impl BinaryReader<'_> {
 /// length stored as a float), else `None`.
 //
 // Compared with its conversion rather than through `fract`, which on the x86-64 baseline
-// (no SSE4.1) calls libm's `trunc` for every value read, indices included: binary PLY loads
-// 9-10% faster (1 thread, medians of 9 interleaved `raypack info` runs, AMD EPYC Zen 5: the
-// Stanford dragon 0.107 -> 0.096 s, the 2M `tools/gen-mesh` knot 0.131 -> 0.119 s).
+// (no SSE4.1) calls libm's `trunc` for every value read, indices included (PERFORMANCE.md,
+// "Smaller measured choices").
 #[inline]
 fn whole_number(v: f64) -> Option<i64> {
     (v.abs() < 1e15 && (v as i64) as f64 == v).then_some(v as i64)

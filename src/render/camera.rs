@@ -85,8 +85,7 @@ impl CameraRays {
     /// [`CameraRays::ray`] through each image position of `positions` (`[px, py]`), in order,
     /// appended to `out`: computed four at a time in SIMD lanes, the same rays bit for bit.
     /// Generating rays one at a time was a chain of two divisions, a square root and a
-    /// reciprocal per ray, 7% of a CBbunny render's time and 14% of the Stanford dragon's
-    /// (`-m 5`, 1 thread).
+    /// reciprocal per ray (PERFORMANCE.md, "Camera rays four at a time").
     #[inline]
     pub fn rays_into(&self, positions: &[[f32; 2]], width: usize, height: usize, out: &mut Vec<Ray>) {
         out.reserve(positions.len());

@@ -247,8 +247,8 @@ fn tiles_of(window: &PixelBounds) -> Vec<PixelBounds> {
 /// One wavefront per thread of the rayon pool, reused from tile to tile. Every tile is a rayon
 /// task of its own (`with_max_len(1)`): with rayon's default split (about two tasks per
 /// thread, a running task never split again) a thread could finish and wait for the other's
-/// last run of tiles; a new wavefront per task, instead of one per thread, cost the Cornell
-/// box's cheap tiles 4% (PERFORMANCE.md, "Work split over threads").
+/// last run of tiles; a new wavefront per task, instead of one per thread, cost the cheap
+/// tiles (PERFORMANCE.md, "Work split over threads").
 struct Wavefronts(Vec<Mutex<wavefront::Wavefront>>);
 
 impl Wavefronts {

@@ -50,10 +50,8 @@ pub fn concentric_disk(u: (f32, f32)) -> (f32, f32) {
 /// `(sin x, cos x)` for `|x| <= π/4` by their Taylor polynomials to x⁹ and x¹⁰ (truncation
 /// error below 3e-9 there, so the result is within about 2 ulp of the exact values): on this
 /// interval, several times cheaper than the library's `sin_cos`, which a cosine-weighted
-/// bounce otherwise pays for at every diffuse hit.
-//
-// `tools/bench-render.py --rounds 3 --spp 64 -t 1 -m 5`, Intel Xeon (model 167), medians, M samples/s:
-// CS184 CBbunny 4.09 -> 4.18 (AVX-512), 4.04 -> 4.11 (AVX2); Stanford dragon 7.48 -> 7.53, 7.71 -> 7.67.
+/// bounce otherwise pays for at every diffuse hit (PERFORMANCE.md, "Smaller measured
+/// choices").
 #[inline]
 pub fn sin_cos_quarter(x: f32) -> (f32, f32) {
     debug_assert!(x.abs() <= FRAC_PI_4 * (1.0 + 1e-6) || !x.is_finite());

@@ -7,16 +7,15 @@ use crate::system::available;
 
 /// Bytes per primitive (triangle or sphere) a scene needs at its peak while it is loaded and
 /// built: the parsed file's vertices and indices, the committed store and the builder's
-/// temporaries. Measured with `raypack info FILE --quality medium` (the process's peak
-/// resident memory over the triangles): 123 on a COLLADA file of 213 KB instanced to 5.0 M
-/// triangles, 122 on the Stanford dragon's PLY (871 k); rounded up.
+/// temporaries: the peak resident memory per triangle that `raypack info FILE --quality
+/// medium` reports, rounded up (PERFORMANCE.md, "Smaller measured choices").
 pub const SCENE_BYTES_PER_PRIMITIVE: u64 = 128;
 
 /// The memory a scene may need without the user asking for more (`--max-primitives`): 512 MiB
 /// (4 M primitives), or [`DEFAULT_SCENE_BYTES_PER_FILE_BYTE`] per byte of its file when that is
 /// more. A file that is not instanced holds at most about one primitive per byte (an OBJ
 /// face line or a PLY polygon costs a byte or more per triangle), so only COLLADA instancing
-/// meets this cap: a 292 KB file that expands to 11.4 M triangles (1.3 GB) must ask.
+/// meets this cap: a small file that instances its geometry millions of times must ask.
 pub const DEFAULT_SCENE_BYTES: u64 = 512 << 20;
 /// See [`DEFAULT_SCENE_BYTES`]: four primitives per byte of the file.
 pub const DEFAULT_SCENE_BYTES_PER_FILE_BYTE: u64 = 4 * SCENE_BYTES_PER_PRIMITIVE;

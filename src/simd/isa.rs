@@ -270,8 +270,7 @@ pub(crate) fn dispatch<O: IsaOp>(isa: Isa, op: O) -> O::Output {
 /// single-ray kernel's is about 10 KB: the traversal stack and spilled constants, probed page
 /// by page), which every call then set up even when it went on to the AVX2 or AVX-512 code;
 /// where `dispatch` itself was not inlined (the `raypack` binary's thin-LTO build), that cost
-/// `Scene::intersect1` up to a third of its speed (CS184 beetle camera rays, AVX2, 1 thread:
-/// 17.1 against 25.4 Mrays/s in a build with cargo's default profile).
+/// `Scene::intersect1` much of its speed (PERFORMANCE.md, "Smaller measured choices").
 #[inline(never)]
 fn run_baseline<O: IsaOp>(op: O) -> O::Output {
     op.run::<Baseline>()

@@ -18,8 +18,8 @@ pub const MAX_NODE_DEPTH: usize = 256;
 /// [`DaeOptions::max_primitives`](super::DaeOptions::max_primitives) is set. `instance_node` and `instance_geometry` multiply: 30
 /// nested nodes that each instance the next twice are 2³⁰ copies from a 2 kB file. Without a
 /// cap such a file takes hours and all memory; with it, an error names the element where the
-/// budget ran out. A legitimate file may still expand a lot (a 292 KB file to 11.4 M
-/// triangles, 1.3 GB once built): the loader's warnings report every expansion.
+/// budget ran out. A legitimate file may still expand a lot (a file of a few hundred kB to
+/// millions of triangles): the loader's warnings report every expansion.
 pub const INSTANCING_BUDGET_PER_BYTE: usize = 64;
 /// The smallest instancing budget (see [`INSTANCING_BUDGET_PER_BYTE`]).
 pub const MIN_INSTANCING_BUDGET: usize = 1 << 20;
