@@ -19,20 +19,33 @@ fn main() {
     embree::build();
 }
 
-/// `RAYPACK_GIT_COMMIT`: `git rev-parse --short HEAD` when git and a checkout are there (the
-/// bench report names it); unset in a source archive or without git.
+/// `RAYPACK_GIT_COMMIT`: `git rev-parse --short HEAD` when git and a checkout are there, with
+/// `-dirty` when the files the build reads differ from that commit (`raypack --version` and the
+/// bench report name it); "unknown" in a source archive or without git.
 fn git_commit() {
     let git = |args: &[&str]| {
         let out = std::process::Command::new("git").args(args).output().ok().filter(|o| o.status.success())?;
-        Some(String::from_utf8(out.stdout).ok()?.trim().to_string()).filter(|s| !s.is_empty())
+        Some(String::from_utf8(out.stdout).ok()?.trim().to_string())
     };
-    let Some(commit) = git(&["rev-parse", "--short", "HEAD"]) else { return };
-    println!("cargo:rustc-env=RAYPACK_GIT_COMMIT={commit}");
-    // Rebuild when HEAD moves: HEAD itself, the branch it names, and the packed refs.
-    for path in ["HEAD", "packed-refs"].map(String::from).into_iter().chain(git(&["symbolic-ref", "-q", "HEAD"])) {
+    let Some(commit) = git(&["rev-parse", "--short", "HEAD"]).filter(|s| !s.is_empty()) else {
+        println!("cargo:rustc-env=RAYPACK_GIT_COMMIT=unknown");
+        return;
+    };
+    // Only the files that go into the binaries count: an edited README does not make it dirty.
+    let built_from = ["src", "build.rs", "Cargo.toml", "Cargo.lock", "scenes", "tests/embree"];
+    let status = git(&[&["status", "--porcelain", "--untracked-files=no", "--"][..], &built_from].concat());
+    let dirty = if status.is_some_and(|s| !s.is_empty()) { "-dirty" } else { "" };
+    println!("cargo:rustc-env=RAYPACK_GIT_COMMIT={commit}{dirty}");
+    // Rebuild when HEAD moves (HEAD itself, the branch it names, the packed refs), when the
+    // index changes, and when a file the build reads changes (which may make it dirty).
+    let refs = ["HEAD", "packed-refs", "index"].map(String::from).into_iter();
+    for path in refs.chain(git(&["symbolic-ref", "-q", "HEAD"]).filter(|s| !s.is_empty())) {
         if let Some(p) = git(&["rev-parse", "--git-path", &path]).filter(|p| std::path::Path::new(p).exists()) {
             println!("cargo:rerun-if-changed={p}");
         }
+    }
+    for path in built_from.into_iter().filter(|p| *p != "build.rs" && std::path::Path::new(p).exists()) {
+        println!("cargo:rerun-if-changed={path}");
     }
 }
 

@@ -204,3 +204,48 @@ fn info_and_bench_default_to_the_built_in_box() {
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("t-sum") && out.contains("best raypack"), "{out}");
 }
+
+#[test]
+fn version_names_the_commit_the_features_and_the_kernels() {
+    let run = |isa: Option<&str>| {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_raypack"));
+        cmd.arg("--version").env_remove("RAYPACK_ISA");
+        if let Some(isa) = isa {
+            cmd.env("RAYPACK_ISA", isa);
+        }
+        let out = cmd.output().unwrap();
+        assert!(out.status.success());
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let text = run(None);
+    let line = |key: &str| {
+        text.lines().find_map(|l| l.strip_prefix(key)).unwrap_or_else(|| panic!("no {key} line: {text}")).to_string()
+    };
+    assert_eq!(text.lines().next(), Some(concat!("raypack ", env!("CARGO_PKG_VERSION"))));
+    // The commit is HEAD's when the tests run in a checkout (the build and the tests see the
+    // same HEAD), else "unknown".
+    let head =
+        Command::new("git").args(["rev-parse", "--short", "HEAD"]).current_dir(env!("CARGO_MANIFEST_DIR")).output();
+    let commit = line("commit: ");
+    match head.ok().filter(|o| o.status.success()) {
+        Some(o) => {
+            let head = String::from_utf8(o.stdout).unwrap().trim().to_string();
+            assert!(commit == head || commit == format!("{head}-dirty"), "{commit} vs HEAD {head}");
+        }
+        None => assert_eq!(commit, "unknown"),
+    }
+    let features = line("features: ");
+    assert!(features.split(", ").any(|f| f == "cli") && features.split(", ").any(|f| f == "image"), "{features}");
+    let embree = line("embree: ");
+    if cfg!(feature = "embree") {
+        assert!(features.contains("embree") && embree.starts_with("Embree ") && embree.contains(" linked"), "{embree}");
+    } else {
+        assert!(embree.starts_with("not built in"), "{embree}");
+    }
+    let best = raypack::Isa::detected();
+    assert!(line("kernels: ").starts_with(&format!("{best} (")), "{text}");
+    // RAYPACK_ISA lowers the kernels' tier, and --version says so.
+    let sse = run(Some("sse"));
+    let kernels = sse.lines().find_map(|l| l.strip_prefix("kernels: ")).unwrap();
+    assert!(kernels.starts_with(&format!("{} (RAYPACK_ISA=", raypack::Isa::Baseline)), "{kernels}");
+}

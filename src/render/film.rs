@@ -1,6 +1,6 @@
-//! The film: a width × height buffer of linear radiance, and its atomic output as PNG (8-bit
-//! sRGB, clamped as CS184 does) or OpenEXR (linear 32-bit float) through
-//! [`crate::fs::output`].
+//! The film: a width × height buffer of linear radiance, and (cargo feature `image`) its
+//! atomic output as PNG (8-bit sRGB, clamped as CS184 does) or OpenEXR (linear 32-bit float)
+//! through [`crate::fs::output`].
 
 use crate::math::Vec3;
 use std::path::{Path, PathBuf};
@@ -79,6 +79,7 @@ impl Film {
     /// Writes the film to `path`: OpenEXR (linear) when it ends in `.exr`, PNG otherwise.
     /// The file appears whole or not at all, and only a regular file (or nothing) at `path`
     /// is replaced ([`crate::fs::output`]).
+    #[cfg(feature = "image")]
     pub fn write(&self, path: &Path, encoding: Encoding) -> Result<(), ImageError> {
         let bytes = self
             .encode(ImageFormat::of(path), encoding)
@@ -87,6 +88,7 @@ impl Film {
     }
 
     /// The film as the bytes of a `format` file (PNG encoded with `encoding`; EXR linear).
+    #[cfg(feature = "image")]
     pub fn encode(&self, format: ImageFormat, encoding: Encoding) -> Result<Vec<u8>, String> {
         match format {
             ImageFormat::Png => encode_png(self.width, self.height, &self.to_rgb8(encoding)),
@@ -145,6 +147,7 @@ impl From<crate::fs::output::OutputError> for ImageError {
 }
 
 /// 8-bit RGB `rgb` (row-major, top row first) as the bytes of a PNG file.
+#[cfg(feature = "image")]
 pub fn encode_png(width: usize, height: usize, rgb: &[u8]) -> Result<Vec<u8>, String> {
     let mut out = Vec::new();
     let mut enc = png::Encoder::new(&mut out, width as u32, height as u32);
@@ -158,6 +161,7 @@ pub fn encode_png(width: usize, height: usize, rgb: &[u8]) -> Result<Vec<u8>, St
 }
 
 /// Writes 8-bit RGB `rgb` (row-major, top row first) as a PNG, atomically.
+#[cfg(feature = "image")]
 pub fn write_png(path: &Path, width: usize, height: usize, rgb: &[u8]) -> Result<(), ImageError> {
     let bytes =
         encode_png(width, height, rgb).map_err(|message| ImageError::Encode { path: path.to_path_buf(), message })?;
@@ -178,6 +182,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg(feature = "image")]
     fn unwritable_path_leaves_nothing() {
         let dir = std::env::temp_dir().join(format!("raypack-film-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();

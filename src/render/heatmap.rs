@@ -10,6 +10,7 @@
 //! the view, with a colour bar labelled with the counts below it ([`super::colorbar`]).
 
 use super::camera::CameraRays;
+#[cfg(feature = "image")]
 use super::colorbar;
 use super::spawn::{spawn_ray, spawn_ray_to};
 use crate::bvh::TraversalCounts;
@@ -133,7 +134,8 @@ fn saturate(n: u64) -> u32 {
     n.min(u32::MAX as u64) as u32
 }
 
-/// A coloured heatmap: 8-bit RGB, row-major, top row first.
+/// A coloured heatmap (cargo feature `image`): 8-bit RGB, row-major, top row first.
+#[cfg(feature = "image")]
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct HeatmapImage {
     /// Width in pixels.
@@ -145,11 +147,13 @@ pub struct HeatmapImage {
 }
 
 /// The viridis colour of `count` on a scale from 0 to `max` (`max` 0: everything is 0).
+#[cfg(feature = "image")]
 pub fn colour(count: u32, max: u32) -> [u8; 3] {
     let f = if max == 0 { 0.0 } else { count as f64 / max as f64 };
     colorous::VIRIDIS.eval_continuous(f.clamp(0.0, 1.0)).as_array()
 }
 
+#[cfg(feature = "image")]
 impl HeatmapCounts {
     /// The image of `view`: counts coloured by [`colour`] with a labelled colour bar beneath.
     pub fn image(&self, view: HeatmapView) -> HeatmapImage {
@@ -186,7 +190,7 @@ impl HeatmapCounts {
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, feature = "image"))]
 mod tests {
     use super::*;
 

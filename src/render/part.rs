@@ -228,6 +228,7 @@ pub struct ImagePart {
     pub provenance: Provenance,
 }
 
+#[cfg(feature = "image")]
 impl ImagePart {
     /// The file's bytes (see the module docs).
     pub fn encode_exr(&self) -> Result<Vec<u8>, String> {
@@ -313,11 +314,13 @@ pub struct PartHeader {
 
 /// Runs third-party decoding code on someone's file: a panic in it is an error in the file,
 /// not a crash.
+#[cfg(feature = "image")]
 fn guard<T>(f: impl FnOnce() -> Result<T, PartError>) -> Result<T, PartError> {
     std::panic::catch_unwind(std::panic::AssertUnwindSafe(f))
         .unwrap_or_else(|_| Err(PartError::Exr("the OpenEXR decoder failed on it".into())))
 }
 
+#[cfg(feature = "image")]
 impl PartHeader {
     /// The header of a part's file (see [`ImagePart::decode_exr`] for what is checked).
     pub fn read(bytes: &[u8]) -> Result<Self, PartError> {
@@ -389,7 +392,7 @@ impl PartHeader {
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, feature = "image"))]
 mod tests {
     use super::*;
     use crate::{BuildOptions, Material, SceneBuilder};

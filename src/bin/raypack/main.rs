@@ -11,6 +11,7 @@ mod merge;
 mod rays;
 mod render;
 mod report;
+mod version;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use raypack::io::LoadError;
@@ -459,6 +460,12 @@ enum CliError {
 
 fn main() -> ExitCode {
     let mut args: Vec<std::ffi::OsString> = std::env::args_os().collect();
+    // Before clap, whose version flag prints a fixed string: the commit, features, Embree
+    // and kernels are this binary's and this machine's.
+    if args.len() == 2 && (args[1] == "-V" || args[1] == "--version") {
+        print!("{}", version::text());
+        return ExitCode::SUCCESS;
+    }
     // CS184 style: `raypack scene.dae -t 8 ...` means `raypack render scene.dae -t 8 ...`.
     let known = ["render", "info", "bench", "report", "merge", "help", "-h", "--help", "-V", "--version"];
     if args.len() > 1 && !known.iter().any(|k| args[1] == *k) {
