@@ -342,3 +342,105 @@ class Manifests(Sandbox):
 
 if __name__ == "__main__":
     unittest.main()
+
+
+class Selection(Sandbox):
+    """What is fetched without --only: the default entries; --all adds the rest."""
+
+    def setup_two(self):
+        small, big = b"small\n", b"big\n"
+        files = [{"name": "cs184/sky/small.dae", "url": self.serve("small.dae", small), "size": len(small), "sha256": sha(small)}]
+        big_entry = {"name": "models/big.ply", "url": self.serve("big.ply", big), "size": len(big), "sha256": sha(big), "default": False}
+        return self.manifest(files + [big_entry])
+
+    def test_entries_marked_not_default_need_all_or_only(self):
+        m = self.setup_two()
+        code, _, err = self.run_fetch("--manifest", m, "--dir", self.dest)
+        self.assertEqual(code, 0, err)
+        self.assertEqual(self.leftovers(), ["cs184/sky/small.dae"])
+        self.assertIn("not fetched without --all (or --only NAME): models/big.ply", err)
+        self.assertEqual(self.run_fetch("--manifest", m, "--dir", self.dest, "--only", "models/big.ply")[0], 0)
+        self.assertEqual(self.leftovers(), ["cs184/sky/small.dae", "models/big.ply"])
+        (self.dest / "models/big.ply").unlink()
+        self.assertEqual(self.run_fetch("--manifest", m, "--dir", self.dest, "--all")[0], 0)
+        self.assertEqual(self.leftovers(), ["cs184/sky/small.dae", "models/big.ply"])
+        code, _, err = self.run_fetch("--manifest", m, "--dir", self.dest, "--all", "--only", "cs184")
+        self.assertEqual(code, 1)
+        self.assertIn("--all and --only", err)
+
+    def test_a_non_boolean_default_is_an_error_naming_the_field(self):
+        m = self.manifest([{"name": "a.dae", "url": "https://example.invalid/a.dae", "size": 1, "sha256": None, "default": "no"}])
+        code, _, err = self.run_fetch("--manifest", m, "--dir", self.dest, "--dry-run")
+        self.assertEqual(code, 1)
+        self.assertIn("files[0].default: expected true or false, got 'no'", err)
+
+    def test_the_real_manifest_fetches_cs184_and_the_dragon_by_default_not_lucy(self):
+        items = fetch.select(fetch.load_manifest(fetch.MANIFEST), None)
+        dests = [d for i in items for d in i.dests()]
+        self.assertIn("cs184/sky/CBbunny.dae", dests)
+        self.assertIn("models/stanford-dragon-871k.ply", dests)
+        self.assertTrue(all(i.name.startswith("cs184/") or i.name == "stanford-dragon" for i in items), [i.name for i in items])
+        self.assertNotIn("models/lucy-28m.ply", dests)
+        everything = fetch.select(fetch.load_manifest(fetch.MANIFEST), None, everything=True)
+        self.assertIn("models/lucy-28m.ply", [d for i in everything for d in i.dests()])
+
+
+class FromDirectory(Sandbox):
+    """--from DIR: archives and files downloaded by hand, checked, used in place, never moved."""
+
+    make_tar = Archives.make_tar
+    archive = Archives.archive
+
+    def setUp(self):
+        super().setUp()
+        self.hand = self.tmp / "downloads"
+        self.hand.mkdir()
+
+    def no_network(self):
+        return mock.patch.object(urllib.request, "urlopen", side_effect=AssertionError("network used"))
+
+    def test_an_archive_downloaded_by_hand_is_extracted_and_left_in_place(self):
+        full = b"ply\nfull\n"
+        _, blob = self.make_tar({"recon/full.ply": full})
+        (self.hand / "recon.tar.gz").write_bytes(blob)
+        members = [{"member": "recon/full.ply", "dest": "models/full.ply", "size": len(full), "sha256": sha(full)}]
+        entry = self.archive("https://example.invalid/pub/recon.tar.gz", blob, members)
+        with self.no_network():
+            code, _, err = self.run_fetch("--manifest", self.manifest(archives=[entry]), "--dir", self.dest, "--from", self.hand)
+        self.assertEqual(code, 0, err)
+        self.assertEqual(self.leftovers(), ["models/full.ply"])
+        self.assertEqual((self.dest / "models/full.ply").read_bytes(), full)
+        self.assertEqual((self.hand / "recon.tar.gz").read_bytes(), blob, "the user's archive stays")
+
+    def test_a_wrong_archive_in_from_is_refused_and_nothing_is_written(self):
+        full = b"ply\nfull\n"
+        _, blob = self.make_tar({"recon/full.ply": full})
+        (self.hand / "recon.tar.gz").write_bytes(blob + b"tampered")
+        members = [{"member": "recon/full.ply", "dest": "models/full.ply", "size": len(full), "sha256": sha(full)}]
+        entry = self.archive("https://example.invalid/pub/recon.tar.gz", blob, members)
+        with self.no_network():
+            code, _, err = self.run_fetch("--manifest", self.manifest(archives=[entry]), "--dir", self.dest, "--from", self.hand)
+        self.assertEqual(code, 1)
+        self.assertIn("recon.tar.gz (given by --from", err)
+        self.assertIn("sha256 mismatch", err)
+        self.assertEqual(self.leftovers(), [])
+        self.assertTrue((self.hand / "recon.tar.gz").exists(), "the user's file is not removed")
+
+    def test_plain_files_by_name_or_path_and_the_rest_downloaded(self):
+        a, b = b"aaa\n", b"bbb\n"
+        (self.hand / "a.dae").write_bytes(a)
+        files = [
+            {"name": "cs184/sky/a.dae", "url": "https://example.invalid/x/a.dae", "size": len(a), "sha256": sha(a)},
+            {"name": "cs184/sky/b.dae", "url": self.serve("b.dae", b), "size": len(b), "sha256": sha(b)},
+        ]
+        code, _, err = self.run_fetch("--manifest", self.manifest(files), "--dir", self.dest, "--from", self.hand)
+        self.assertEqual(code, 0, err)
+        self.assertEqual(self.leftovers(), ["cs184/sky/a.dae", "cs184/sky/b.dae"])
+        self.assertIn("cs184/sky/b.dae: not in", err)
+        self.assertTrue((self.hand / "a.dae").exists())
+
+    def test_from_a_missing_directory_is_an_error(self):
+        code, _, err = self.run_fetch("--manifest", self.manifest(), "--dir", self.dest, "--from", self.tmp / "nosuch")
+        self.assertEqual(code, 1)
+        self.assertIn("--from", err)
+        self.assertIn("not a directory", err)
