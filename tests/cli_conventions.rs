@@ -249,3 +249,85 @@ fn version_names_the_commit_the_features_and_the_kernels() {
     let kernels = sse.lines().find_map(|l| l.strip_prefix("kernels: ")).unwrap();
     assert!(kernels.starts_with(&format!("{} (RAYPACK_ISA=", raypack::Isa::Baseline)), "{kernels}");
 }
+
+#[test]
+fn render_takes_the_scene_as_a_flag_as_info_and_bench_do() {
+    let dir = scratch_dir("scene-flag");
+    let obj = dir.join("quad.obj");
+    std::fs::write(&obj, "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nf 1 2 3 4\n").unwrap();
+    let (a, b, c) = (dir.join("a.png"), dir.join("b.png"), dir.join("c.png"));
+    let (code, err, _) = raypack(&["render", s(&obj), "-r", "16", "12", "-q", "-o", s(&a)]);
+    assert_eq!(code, 0, "{err}");
+    let (code, err, _) = raypack(&["render", "--scene", s(&obj), "-r", "16", "12", "-q", "-o", s(&b)]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(pixels(&a), pixels(&b), "--scene FILE renders what SCENE does");
+    // The CS184 form without a command, with the flag.
+    let (code, err, _) = raypack(&["--scene", s(&obj), "-r", "16", "12", "-q", "-o", s(&c)]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(pixels(&a), pixels(&c));
+    let (code, err, _) = raypack(&["render", s(&obj), "--scene", s(&obj), "-r", "16", "12", "-q"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("--scene"), "{err}");
+}
+
+#[test]
+fn t_is_one_thread_count_on_every_command() {
+    for cmd in ["render", "info", "bench"] {
+        let (code, err, _) = raypack(&[cmd, "-t", "1,2"]);
+        assert_eq!(code, 2, "{cmd}: {err}");
+        assert!(err.contains("-t takes one thread count") && err.contains("--threads-list 1,2"), "{cmd}: {err}");
+        let (code, err, _) = raypack(&[cmd, "-t", "0"]);
+        assert_eq!(code, 2, "{cmd}: {err}");
+        assert!(err.contains("-t 0: need at least one thread"), "{cmd}: {err}");
+    }
+    let (code, err, _) = raypack(&["bench", "-t", "1", "--threads-list", "1,2"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("--threads-list"), "{err}");
+    // bench -t N times at N threads; --threads-list at each of its counts (`all`: every core).
+    let bench = |threads: &[&str]| {
+        let args = [&["bench", "-r", "8", "6", "--runs", "1", "--build-runs", "1", "--methods", "stream"][..], threads];
+        let (code, err, out) = raypack(&[&args.concat()[..], &["--json", "-"]].concat());
+        assert_eq!(code, 0, "{err}");
+        let json: serde_json::Value = serde_json::from_str(&out).unwrap();
+        let mut counts: Vec<u64> =
+            json["results"].as_array().unwrap().iter().map(|r| r["threads"].as_u64().unwrap()).collect();
+        counts.sort();
+        counts.dedup();
+        counts
+    };
+    assert_eq!(bench(&["-t", "1"]), [1]);
+    let all = std::thread::available_parallelism().unwrap().get() as u64;
+    let mut want = vec![1, all];
+    want.dedup();
+    assert_eq!(bench(&["--threads-list", "1,all"]), want);
+}
+
+#[test]
+fn every_error_has_one_prefix_on_a_line_of_its_own() {
+    let dir = scratch_dir("prefix");
+    // An argument error (clap's), a missing scene and a malformed one (after "Collecting
+    // primitives... " has been printed): each error line starts with "[raypack] error: ".
+    let bad = dir.join("bad.obj");
+    std::fs::write(&bad, "v 0 0 0\nv 1 0 0\nf 1 2 7\n").unwrap();
+    let out = dir.join("x.png");
+    for args in [
+        vec!["render", "--no-such-flag"],
+        vec!["render", "/nonexistent/box.dae", "-r", "8", "6", "-o", s(&out)],
+        vec!["render", s(&bad), "-r", "8", "6", "-o", s(&out)],
+        vec!["info", "-t", "x"],
+        vec!["rendr"],
+    ] {
+        let (code, err, _) = raypack(&args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        let lines: Vec<&str> = err.lines().filter(|l| l.contains("error")).collect();
+        assert!(!lines.is_empty(), "{args:?}: {err}");
+        for l in &lines {
+            assert!(l.starts_with("[raypack] error: ") || !l.contains("error:"), "{args:?}: {l:?} in {err}");
+        }
+        assert!(err.lines().any(|l| l.starts_with("[raypack] error: ")), "{args:?}: {err}");
+    }
+    // The malformed scene's error comes after the progress line, not on it.
+    let (_, err, _) = raypack(&["render", s(&bad), "-r", "8", "6", "-o", s(&out)]);
+    let progress = err.lines().find(|l| l.contains("Collecting primitives")).expect("progress shown");
+    assert!(!progress.contains("error"), "{err}");
+}

@@ -44,7 +44,7 @@ fn raypack_isa_garbage_or_not_utf8_is_an_error() {
         let env = [("RAYPACK_ISA", std::ffi::OsStr::from_bytes(value))];
         let r = finish(command(&args, &env).spawn().unwrap(), TIMEOUT);
         assert_eq!(r.code, Some(2), "{value:?}: {r:?}");
-        let want = format!("raypack: error: RAYPACK_ISA: unknown ISA {shown}: expected sse, avx2 or avx512");
+        let want = format!("[raypack] error: RAYPACK_ISA: unknown ISA {shown}: expected sse, avx2 or avx512");
         assert!(r.stderr.contains(&want), "{value:?}: {}", r.stderr);
         assert!(!out.exists());
     }

@@ -8,6 +8,7 @@
 //! tier.
 
 use crate::machine::{self, CpuTimes, Machine};
+use crate::say;
 use crate::{BenchArgs, CliError, check_memory, load, print_warnings};
 #[cfg(feature = "embree")]
 use raypack::methods::embree_methods;
@@ -870,17 +871,20 @@ fn build_timed(builder: &SceneBuilder, opts: &BuildOptions, a: &BenchArgs) -> Re
         Some(dir) => {
             let (scene, report, cache) = b.commit_cached(opts, dir);
             for w in cache.warnings() {
-                eprintln!("[raypack] warning: {w}");
+                say::warning(w);
             }
             if cache.loaded {
-                eprintln!("[raypack] BVH loaded from {} (the build time below is the load time)", cache.path.display());
+                say::line(format_args!(
+                    "BVH loaded from {} (the build time below is the load time)",
+                    cache.path.display()
+                ));
             }
             (scene, report)
         }
     };
     let time = t.elapsed();
     if report.dropped() > 0 {
-        eprintln!("[raypack] warning: {report}");
+        say::warning(report);
     }
     let quality = format!("{:?}", opts.quality).to_lowercase();
     let build = BuildFigures::from_times(
@@ -918,10 +922,16 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     if a.build_runs == 0 {
         return Err(CliError::Usage("--build-runs 0: need at least one build".into()));
     }
-    // `-t 0` means all cores here; any other count is checked as elsewhere.
-    for &t in a.threads.iter().filter(|&&t| t > 0) {
+    // `-t N` is checked as on every command; in `--threads-list`, 0 means all cores.
+    crate::machine::check_threads(a.threads)?;
+    for &t in a.threads_list.iter().filter(|&&t| t > 0) {
         crate::machine::check_threads(Some(t))?;
     }
+    let threads = match (a.threads, a.threads_list.is_empty()) {
+        (Some(t), _) => vec![t],
+        (None, false) => a.threads_list.clone(),
+        (None, true) => vec![1, 0],
+    };
     let mut settings = BenchSettings {
         width,
         height,
@@ -931,7 +941,7 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
         embree_robust: a.watertight,
         isa: a.isa,
         methods: a.methods.clone(),
-        threads: if a.threads.is_empty() { vec![1, 0] } else { a.threads.clone() },
+        threads,
         ..Default::default()
     };
     if settings.against_embree && !cfg!(feature = "embree") {
@@ -969,7 +979,7 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     // No more builds from a BVH cache: its second "build" would be a load.
     let rebuild = |k: usize| rebuild_time(&builder, &tree_opts[k]);
     let rebuild: Option<&dyn Fn(usize) -> Duration> = if a.bvh_cache.is_none() { Some(&rebuild) } else { None };
-    let out = run_bench(&name, &mut trees, &settings, rebuild, &mut |line| eprintln!("[raypack] {line}"))?;
+    let out = run_bench(&name, &mut trees, &settings, rebuild, &mut |line| say::line(line))?;
     match a.json.as_deref() {
         Some(p) if p == Path::new("-") => println!("{:#}", out.json()),
         Some(p) => {
@@ -982,7 +992,7 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
         let json = dir.join("bench.json");
         write_file_with(&json, format!("{:#}\n", out.json()).as_bytes(), &json_opts)?;
         crate::report::write_report(&[json], dir)?;
-        eprintln!("[raypack] report: {}", dir.join("index.html").display());
+        say::line(format_args!("report: {}", dir.join("index.html").display()));
     }
     Ok(())
 }

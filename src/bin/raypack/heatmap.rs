@@ -1,6 +1,7 @@
 //! `raypack render --integrator heatmap`: the traversal-cost heatmap
 //! ([`raypack::render::heatmap`]) of a scene, written as a PNG whole or not at all.
 
+use crate::say;
 use crate::{CliError, RenderArgs, commit, load, print_warnings};
 use clap::ValueEnum;
 use raypack::BuildOptions;
@@ -85,14 +86,14 @@ pub(crate) fn cmd_heatmap(a: RenderArgs) -> Result<(), CliError> {
             let mean = v.iter().map(|&c| c as f64).sum::<f64>() / v.len().max(1) as f64;
             format!("mean {mean:.2}, max {max}")
         };
-        eprintln!(
-            "[raypack] Heatmap of {} rays ({} kernels, {:.4} s): nodes visited {}; primitive-block tests {}",
+        say::line(format_args!(
+            "Heatmap of {} rays ({} kernels, {:.4} s): nodes visited {}; primitive-block tests {}",
             rays.to_possible_value().map_or("camera".into(), |v| v.get_name().to_owned()),
             scene.isa(),
             t.elapsed().as_secs_f64(),
             stat(&counts.nodes),
             stat(&counts.tests)
-        );
+        ));
         let image = counts.image(view);
         let bytes = raypack::render::film::encode_png(image.width, image.height, &image.rgb)
             .map_err(|message| raypack::render::ImageError::Encode { path: output.clone(), message })?;
@@ -105,7 +106,7 @@ pub(crate) fn cmd_heatmap(a: RenderArgs) -> Result<(), CliError> {
                 .map_err(|source| raypack::render::ImageError::Io { path: output.clone(), source })?;
         } else {
             raypack::fs::output::write_file_with(&output, &bytes, &out_opts)?;
-            eprintln!("[raypack] Saved {}", output.display());
+            say::line(format_args!("Saved {}", output.display()));
         }
         Ok(())
     })

@@ -2,6 +2,7 @@
 //! tree statistics per build quality, bytes per triangle of the scene store and of the
 //! acceleration structures, and the peak resident memory of the process.
 
+use crate::say;
 use crate::{CliError, InfoArgs, print_warnings};
 use raypack::bvh::{BuildOptions, BuildQuality, Bvh8Stats, BvhStats};
 use raypack::io::LoadError;
@@ -467,7 +468,7 @@ pub(crate) fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
     let info = pool.install(|| scene_info(a.scene_path(), &opts))?;
     print_warnings(&info.warnings);
     for w in info.builds.iter().flat_map(|b| &b.cache_warnings) {
-        eprintln!("[raypack] warning: {w}");
+        say::warning(w);
     }
     if a.json {
         println!("{:#}", info.json());

@@ -11,6 +11,7 @@ mod merge;
 mod rays;
 mod render;
 mod report;
+mod say;
 mod version;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
@@ -113,10 +114,14 @@ struct BenchArgs {
     /// threads; the median is reported, with the fastest and slowest.
     #[arg(long, value_name = "N", default_value_t = 3)]
     build_runs: usize,
-    /// Thread counts to time at, comma-separated, e.g. `-t 1,2` (0: all cores; default: 1
-    /// and all).
-    #[arg(short = 't', long = "threads", value_delimiter = ',')]
-    threads: Vec<usize>,
+    /// Time at this many threads, as `render -t` and `info -t` run on (default: 1 and all
+    /// cores; several counts: --threads-list).
+    #[arg(short = 't', long = "threads", value_parser = parse_thread_count, conflicts_with = "threads_list")]
+    threads: Option<usize>,
+    /// Thread counts to time at, comma-separated, e.g. `--threads-list 1,2` (0 or `all`: all
+    /// cores) [default: 1,all].
+    #[arg(long, value_name = "N,N,...", value_delimiter = ',', value_parser = parse_list_thread_count)]
+    threads_list: Vec<usize>,
     /// Time only the methods whose name contains one of these, comma-separated (e.g.
     /// `stream,rtcIntersect8`).
     #[arg(long, value_delimiter = ',')]
@@ -192,8 +197,11 @@ impl IntegratorArg {
 struct RenderArgs {
     /// Scene file (.dae, .obj, .ply); omit for the built-in Cornell box.
     scene: Option<PathBuf>,
+    /// The scene file, as a flag (instead of SCENE), as `info` and `bench` take it.
+    #[arg(long = "scene", value_name = "FILE", conflicts_with = "scene")]
+    scene_flag: Option<PathBuf>,
     /// Worker threads (default: all cores).
-    #[arg(short = 't', long = "threads")]
+    #[arg(short = 't', long = "threads", value_parser = parse_thread_count)]
     threads: Option<usize>,
     /// Camera rays per pixel, at least 1 [default: 1, as CS184; the built-in Cornell box: 128].
     #[arg(short = 's', long = "samples", visible_alias = "spp")]
@@ -371,7 +379,7 @@ struct InfoArgs {
     #[arg(long, value_name = "DIR")]
     bvh_cache: Option<PathBuf>,
     /// Worker threads of the builds (default: all cores).
-    #[arg(short = 't', long = "threads")]
+    #[arg(short = 't', long = "threads", value_parser = parse_thread_count)]
     threads: Option<usize>,
     /// Print the figures as JSON.
     #[arg(long)]
@@ -432,6 +440,23 @@ impl InfoArgs {
     }
 }
 
+/// Parses `-t`: one thread count, the same on every command (a list is `bench
+/// --threads-list`'s; the limits are checked by [`machine::check_threads`]).
+fn parse_thread_count(s: &str) -> Result<usize, String> {
+    if s.contains(',') {
+        return Err(format!("-t takes one thread count; to time `bench` at several, use --threads-list {s}"));
+    }
+    s.trim().parse().map_err(|_| format!("expected a whole number of threads, got '{s}'"))
+}
+
+/// Parses one entry of `bench --threads-list`: a thread count, or 0 or `all` for all cores.
+fn parse_list_thread_count(s: &str) -> Result<usize, String> {
+    match s.trim() {
+        "all" => Ok(0),
+        t => t.parse().map_err(|_| format!("expected a whole number of threads or 'all', got '{s}'")),
+    }
+}
+
 /// Parses `--isa`, refusing a tier the CPU lacks.
 fn parse_isa(s: &str) -> Result<Isa, String> {
     Isa::parse(s).and_then(Isa::check).map_err(|e| e.to_string())
@@ -474,33 +499,47 @@ fn main() -> ExitCode {
         let first = Path::new(&args[1]);
         let is_flag = args[1].to_string_lossy().starts_with('-');
         if !is_flag && !first.exists() && raypack::io::SceneFormat::from_path(first).is_none() {
-            eprintln!(
-                "raypack: error: unknown command '{}'; the commands are render, info, bench, report, merge and help \
+            say::error(format_args!(
+                "unknown command '{}'; the commands are render, info, bench, report, merge and help \
                  (`raypack SCENE` renders a .dae, .obj or .ply file; `raypack --help` lists the flags)",
                 args[1].to_string_lossy()
-            );
+            ));
             return ExitCode::from(2);
         }
         args.insert(1, "render".into());
     }
     let cli = match Cli::try_parse_from(args) {
         Ok(cli) => cli,
+        Err(e) if e.use_stderr() => {
+            // clap's own "error: " becomes the command's one prefix; its colours stay on a
+            // terminal.
+            use std::io::IsTerminal;
+            let styled = e.render();
+            let text = if std::io::stderr().is_terminal() { styled.ansi().to_string() } else { styled.to_string() };
+            match text.find("error:") {
+                Some(at) => eprint!("{}{} {}", &text[..at], say::PREFIX, &text[at..]),
+                None => eprint!("{text}"),
+            }
+            return ExitCode::from(2);
+        }
         Err(e) => {
-            let code = if e.use_stderr() { 2 } else { 0 };
             let _ = e.print();
-            return ExitCode::from(code);
+            return ExitCode::SUCCESS;
         }
     };
     match Isa::env_report() {
         Err(e) => {
-            eprintln!("raypack: error: {e}");
+            say::error(e);
             return ExitCode::from(2);
         }
-        Ok(Some(warning)) => eprintln!("[raypack] warning: {warning}"),
+        Ok(Some(warning)) => say::warning(warning),
         Ok(None) => {}
     }
     let result = match cli.command {
-        Command::Render(a) => render::cmd_render(a),
+        Command::Render(mut a) => {
+            a.scene = a.scene.take().or(a.scene_flag.take());
+            render::cmd_render(a)
+        }
         Command::Info(a) => info::cmd_info(a),
         Command::Bench(a) => bench::cmd_bench(a),
         Command::Report(a) => report::write_report(&a.json, &a.out),
@@ -509,7 +548,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("raypack: error: {e}");
+            say::error(e);
             ExitCode::from(2)
         }
     }
@@ -538,7 +577,7 @@ fn check_memory(width: usize, height: usize, needed: u64, per_pixel: u64) -> Res
 
 fn print_warnings(warnings: &[String]) {
     for w in warnings {
-        eprintln!("[raypack] warning: {w}");
+        say::warning(w);
     }
 }
 
@@ -550,18 +589,18 @@ fn commit(builder: SceneBuilder, opts: &BuildOptions, cache: Option<&Path>, quie
     let (scene, report) = match cache {
         None => {
             if !quiet {
-                eprint!("[raypack] Building BVH from {n} primitives... ");
+                say::start(format_args!("Building BVH from {n} primitives... "));
             }
             let r = builder.commit(opts);
             if !quiet {
-                eprintln!("Done! ({:.4} sec)", t.elapsed().as_secs_f64());
+                say::done(format_args!("Done! ({:.4} sec)", t.elapsed().as_secs_f64()));
             }
             r
         }
         Some(dir) => {
             let (scene, report, cache) = builder.commit_cached(opts, dir);
             for w in cache.warnings() {
-                eprintln!("[raypack] warning: {w}");
+                say::warning(w);
             }
             let how = match (cache.loaded, &cache.write_error) {
                 (true, _) => "Loaded BVH of",
@@ -569,17 +608,17 @@ fn commit(builder: SceneBuilder, opts: &BuildOptions, cache: Option<&Path>, quie
                 (false, Some(_)) => "Built BVH (not cached) from",
             };
             if !quiet {
-                eprintln!(
-                    "[raypack] {how} {n} primitives: {} ({:.4} sec)",
+                say::line(format_args!(
+                    "{how} {n} primitives: {} ({:.4} sec)",
                     cache.path.display(),
                     t.elapsed().as_secs_f64()
-                );
+                ));
             }
             (scene, report)
         }
     };
     if report.dropped() > 0 {
-        eprintln!("[raypack] warning: {report}");
+        say::warning(report);
     }
     scene
 }

@@ -2,6 +2,7 @@
 //! checks that they come from one render and cover the image, and writes the whole image,
 //! whole or not at all.
 
+use crate::say;
 use crate::{CliError, MergeArgs};
 use raypack::render::merge::{MergeError, Merger};
 use raypack::render::part::{ImagePart, PartError, PartHeader};
@@ -97,8 +98,8 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), CliError> {
     };
     raypack::fs::output::write_file_with(&a.output, &bytes, &out_opts)?;
     if !a.quiet {
-        eprintln!(
-            "[raypack] Merged {} parts into {} ({}x{}){}.",
+        say::line(format_args!(
+            "Merged {} parts into {} ({}x{}){}.",
             report.parts,
             a.output.display(),
             whole.width,
@@ -108,7 +109,7 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), CliError> {
             } else {
                 String::new()
             }
-        );
+        ));
     }
     Ok(())
 }

@@ -2,6 +2,7 @@
 //! from or written to ray files ([`raypack::io::rays`]).
 
 use crate::bench::BenchSettings;
+use crate::say;
 use crate::{BenchArgs, CliError};
 use raypack::Scene;
 use raypack::io::rays::{read_rays, write_rays};
@@ -19,7 +20,7 @@ pub(crate) fn ray_sets(
         if rays.is_empty() {
             return Err(CliError::Usage(format!("--rays {}: the file holds no rays", file.display())));
         }
-        eprintln!("[raypack] {} rays from {}", rays.len(), file.display());
+        say::line(format_args!("{} rays from {}", rays.len(), file.display()));
         return Ok(Some(vec![RaySet { kind: RaySetKind::File, rays }]));
     }
     let Some(dir) = &a.dump_rays else { return Ok(None) };
@@ -30,7 +31,7 @@ pub(crate) fn ray_sets(
         for ext in ["rays", "npy"] {
             let path = dir.join(format!("{}.{ext}", set.kind.name()));
             write_rays(&path, &set.rays)?;
-            eprintln!("[raypack] wrote {} {} rays to {}", set.rays.len(), set.kind.name(), path.display());
+            say::line(format_args!("wrote {} {} rays to {}", set.rays.len(), set.kind.name(), path.display()));
         }
     }
     Ok(Some(sets))

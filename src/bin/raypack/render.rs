@@ -1,6 +1,7 @@
 //! `raypack render`: loads the scene, renders it with a progress bar, prints CS184's report
 //! and writes the image (and the sample-rate image with `-a`) whole or not at all.
 
+use crate::say;
 use crate::{CliError, RenderArgs, check_memory, commit, load, print_warnings};
 use raypack::math::Vec3;
 use raypack::render::{self, RenderSettings};
@@ -45,17 +46,17 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         )));
     }
     if samples == 0 {
-        eprintln!("[raypack] warning: -s 0: rendering 1 sample per pixel (the least)");
+        say::warning(format_args!("-s 0: rendering 1 sample per pixel (the least)"));
     }
     if light_samples == 0 {
-        eprintln!("[raypack] warning: -l 0: taking 1 shadow ray per area light (the least)");
+        say::warning(format_args!("-l 0: taking 1 shadow ray per area light (the least)"));
     }
     if let Some((batch, _)) = adaptive.filter(|&(batch, _)| batch > samples.max(1)) {
-        eprintln!(
-            "[raypack] warning: -a {batch}: the batch is larger than the {} samples per pixel of -s; batches of {} are used",
+        say::warning(format_args!(
+            "-a {batch}: the batch is larger than the {} samples per pixel of -s; batches of {} are used",
             samples.max(1),
             samples.max(1)
-        );
+        ));
     }
     let output = a.output.clone().unwrap_or_else(|| {
         let stem = a.scene.as_ref().and_then(|s| s.file_stem()).map(|s| s.to_string_lossy().into_owned());
@@ -139,13 +140,13 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         // Read before the scene: a bad camera file fails at once.
         let file_camera = a.camera.as_deref().map(raypack::io::camera_file::load_camera_file).transpose()?;
         if !quiet {
-            eprint!("[raypack] Collecting primitives... ");
+            say::start(format_args!("Collecting primitives... "));
         }
         let t = Instant::now();
         let (builder, warnings) = load(a.scene.as_deref(), a.max_primitives)?;
         let load_time = t.elapsed().as_secs_f64();
         if !quiet {
-            eprintln!("Done! ({load_time:.4} sec)");
+            say::done(format_args!("Done! ({load_time:.4} sec)"));
         }
         print_warnings(&warnings);
         let opts = BuildOptions { quality: a.quality.into(), watertight: a.watertight, ..BuildOptions::default() };
@@ -170,27 +171,27 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             return write_camera(p, &text, &out_opts);
         }
         if let Some(why) = hemisphere_sees_no_light(&scene, &settings) {
-            eprintln!("[raypack] warning: -H: {why}");
+            say::warning(format_args!("-H: {why}"));
         }
         let bar = if quiet { indicatif::ProgressBar::hidden() } else { progress_bar(render::tiles_in(&window)) };
         if !quiet {
             let part = if window.is_full(width, height) { String::new() } else { format!(" pixels {window} of") };
-            eprintln!(
-                "[raypack] Rendering{part} {width}x{height} with {} threads ({} kernels)...",
+            say::line(format_args!(
+                "Rendering{part} {width}x{height} with {} threads ({} kernels)...",
                 rayon::current_num_threads(),
                 scene.isa()
-            );
+            ));
         }
         let out = render::render_window(&scene, &camera, &settings, &window, &|done| bar.set_position(done));
         bar.finish_and_clear();
         if !quiet {
-            eprintln!("[raypack] Rendering... 100%! ({:.4}s)", out.stats.time.as_secs_f64());
+            say::line(format_args!("Rendering... 100%! ({:.4}s)", out.stats.time.as_secs_f64()));
             report(&scene, &settings, &out, setup_time);
         } else if out.stats.invalid_samples > 0 {
-            eprintln!(
-                "[raypack] warning: {} samples were NaN or infinite and counted as black.",
+            say::warning(format_args!(
+                "{} samples were NaN or infinite and counted as black.",
                 out.stats.invalid_samples
-            );
+            ));
         }
         let t = Instant::now();
         let encode = |film: &render::Film, path: &Path, format, encoding| {
@@ -215,7 +216,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         };
         if to_stdout {
             if !quiet {
-                eprint!("[raypack] Writing the image to standard output... ");
+                say::start(format_args!("Writing the image to standard output... "));
             }
             use std::io::Write;
             let mut stdout = std::io::stdout().lock();
@@ -226,7 +227,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
         } else {
             use raypack::fs::output::{commit_all, stage};
             if !quiet {
-                eprint!("[raypack] Saving to file: {}... ", output.display());
+                say::start(format_args!("Saving to file: {}... ", output.display()));
             }
             let mut files = vec![stage(&output, &out_opts, &mut |w| w.write_all(&image))?];
             if let (Some(rate), Some((batch, tol))) = (&rate_path, settings.adaptive) {
@@ -235,14 +236,14 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
                 let bytes = encode(&film, rate, render::ImageFormat::Png, render::Encoding::Display)?;
                 files.push(stage(rate, &out_opts, &mut |w| w.write_all(&bytes))?);
                 if !quiet {
-                    eprint!("(sample rate: {}, batch {batch}, tolerance {tol}) ", rate.display());
+                    say::more(format_args!("(sample rate: {}, batch {batch}, tolerance {tol}) ", rate.display()));
                 }
             }
             // The image and its sample-rate image: both or neither.
             commit_all(files)?;
         }
         if !quiet {
-            eprintln!("Done! ({:.4} sec)", t.elapsed().as_secs_f64());
+            say::done(format_args!("Done! ({:.4} sec)", t.elapsed().as_secs_f64()));
         }
         Ok(())
     })
@@ -316,7 +317,7 @@ fn write_camera(path: &Path, text: &str, opts: &raypack::fs::output::OutputOptio
         return Ok(());
     }
     raypack::fs::output::write_file_with(path, text.as_bytes(), opts)?;
-    eprintln!("[raypack] Wrote the camera to {} (render from it with -c {0}); nothing rendered.", path.display());
+    say::line(format_args!("Wrote the camera to {} (render from it with -c {0}); nothing rendered.", path.display()));
     Ok(())
 }
 
@@ -452,51 +453,51 @@ fn report(scene: &Scene, settings: &RenderSettings, out: &render::RenderOutput, 
     let s = &out.stats;
     let secs = s.time.as_secs_f64().max(1e-9);
     let rays = s.rays;
-    eprintln!("[raypack] BVH traced {} rays.", rays.total());
-    eprintln!("[raypack] Average speed {:.4} million rays per second.", rays.total() as f64 / secs / 1e6);
+    say::line(format_args!("BVH traced {} rays.", rays.total()));
+    say::line(format_args!("Average speed {:.4} million rays per second.", rays.total() as f64 / secs / 1e6));
     for kind in render::RayKind::ALL {
         let n = rays.of(kind);
         let tests = render::stats::tests_per_ray(scene, &s.sampled_rays[kind as usize], kind, settings.brute_force);
         let tests = tests.map_or("-".into(), |t| format!("{t:.3}"));
-        eprintln!(
-            "[raypack]   {:<6} {:>12} rays, {:>9.4} Mrays/s, {} intersection tests per ray",
+        say::line(format_args!(
+            "  {:<6} {:>12} rays, {:>9.4} Mrays/s, {} intersection tests per ray",
             kind.name(),
             n,
             n as f64 / secs / 1e6,
             tests
-        );
+        ));
     }
     let px = out.window.area() as f64;
-    eprintln!(
-        "[raypack] {} samples ({:.1} per pixel), {:.4} million samples per second.",
+    say::line(format_args!(
+        "{} samples ({:.1} per pixel), {:.4} million samples per second.",
         s.samples,
         s.samples as f64 / px,
         s.samples as f64 / secs / 1e6
-    );
+    ));
     if s.culled_samples > 0 {
-        eprintln!(
-            "[raypack] {} samples ({:.1}%) of pixels whose cone of camera rays misses the scene took a miss's value without tracing.",
+        say::line(format_args!(
+            "{} samples ({:.1}%) of pixels whose cone of camera rays misses the scene took a miss's value without tracing.",
             s.culled_samples,
             100.0 * s.culled_samples as f64 / s.samples.max(1) as f64
-        );
+        ));
     }
     if s.invalid_samples > 0 {
-        eprintln!("[raypack] warning: {} samples were NaN or infinite and counted as black.", s.invalid_samples);
+        say::warning(format_args!("{} samples were NaN or infinite and counted as black.", s.invalid_samples));
     }
     if let Some(max) = settings.max_sample_value {
-        eprintln!("[raypack] {} samples were scaled down to the --clamp value {max}.", s.clamped_samples);
+        say::line(format_args!("{} samples were scaled down to the --clamp value {max}.", s.clamped_samples));
     }
-    eprintln!(
-        "[raypack] Time: {} {:.4}s, {} {:.4}s, render {:.4}s.",
+    say::line(format_args!(
+        "Time: {} {:.4}s, {} {:.4}s, render {:.4}s.",
         setup[0].0, setup[0].1, setup[1].0, setup[1].1, secs
-    );
+    ));
     let p = &s.phases;
     let total = p.total().as_secs_f64().max(1e-9);
     let phase = |name: &str, d: std::time::Duration| {
         format!("{name} {:.4}s ({:.1}%)", d.as_secs_f64(), 100.0 * d.as_secs_f64() / total)
     };
-    eprintln!(
-        "[raypack] Thread time by phase: {}, {}, {}, {}, {}, {}, {}, {}.",
+    say::line(format_args!(
+        "Thread time by phase: {}, {}, {}, {}, {}, {}, {}, {}.",
         phase("generate", p.generate),
         phase("trace camera", p.trace[0]),
         phase("trace shadow", p.trace[1]),
@@ -505,7 +506,7 @@ fn report(scene: &Scene, settings: &RenderSettings, out: &render::RenderOutput, 
         phase("sort", p.sort),
         phase("compact", p.compact),
         phase("film", p.film)
-    );
+    ));
 }
 
 fn progress_bar(len: usize) -> indicatif::ProgressBar {
