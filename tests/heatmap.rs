@@ -6,7 +6,7 @@ mod common;
 
 use raypack::bvh::TraversalCounts;
 use raypack::render::camera::CameraRays;
-use raypack::render::heatmap::{self, HeatmapRays, HeatmapView};
+use raypack::render::heatmap::{self, HeatmapRays, HeatmapScale, HeatmapView};
 use raypack::{BuildOptions, Scene};
 
 fn check(scene: &Scene, name: &str, width: usize, height: usize) {
@@ -62,7 +62,17 @@ fn check(scene: &Scene, name: &str, width: usize, height: usize) {
             let counts_of = if view == HeatmapView::Tests { &counts.tests } else { &counts.nodes };
             let max = *counts_of.iter().max().unwrap();
             let at = counts_of.iter().position(|&c| c == max).unwrap();
-            assert_eq!(&img.rgb[(at / width * img.width + at % width) * 3..][..3], &heatmap::colour(max, max));
+            let px = ((img.top + at / width) * img.width + at % width) * 3;
+            assert_eq!(&img.rgb[px..][..3], &heatmap::colour(max, max));
+            // Every scale draws the costliest pixel in the top colour and 0 in the bottom one.
+            for scale in [HeatmapScale::Log, HeatmapScale::Percentile(90.0)] {
+                let img = counts.image_scaled(view, scale);
+                assert_eq!(&img.rgb[px..][..3], &heatmap::colour(max, max), "{scale:?}");
+                if let Some(zero) = counts_of.iter().position(|&c| c == 0) {
+                    let pz = ((img.top + zero / width) * img.width + zero % width) * 3;
+                    assert_eq!(&img.rgb[pz..][..3], &heatmap::colour(0, max), "{scale:?}");
+                }
+            }
         }
     }
 }
@@ -95,4 +105,28 @@ fn shadow_heatmap_needs_a_light() {
         heatmap::HeatmapError::NoLight
     );
     assert!(heatmap::trace_counts(&scene, &camera, 8, 8, HeatmapRays::Camera).is_ok());
+}
+
+/// The log scale and a percentile spread counts that a linear scale draws in nearly one
+/// colour: counts 1..=100 but one pixel at 10,000.
+#[test]
+fn log_and_percentile_scales_spread_a_skewed_image() {
+    let (width, height) = (101, 1);
+    let mut tests: Vec<u32> = (1..=100).collect();
+    tests.push(10_000);
+    let counts = heatmap::HeatmapCounts { width, height, nodes: tests.clone(), tests };
+    let distinct = |scale| {
+        let img = counts.image_scaled(HeatmapView::Tests, scale);
+        let row = &img.rgb[img.top * img.width * 3..(img.top + 1) * img.width * 3];
+        let mut colours: Vec<&[u8]> = row.chunks(3).collect();
+        colours.sort();
+        colours.dedup();
+        colours.len()
+    };
+    let (linear, log, p99) =
+        (distinct(HeatmapScale::Linear), distinct(HeatmapScale::Log), distinct(HeatmapScale::Percentile(99.0)));
+    assert!(linear <= 4, "linear: {linear} colours");
+    assert!(log > 40 && p99 > 80, "log {log}, p99 {p99} colours");
+    assert_eq!(heatmap::percentile(&counts.tests, 99.0), 100);
+    assert_eq!(heatmap::percentile(&counts.tests, 100.0), 10_000);
 }

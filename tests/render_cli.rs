@@ -63,7 +63,9 @@ fn adaptive_render_writes_image_and_rate_image_and_reports_per_ray_kind() {
         assert!(log.contains("Time: load") && log.contains("render"), "{log}");
     }
     assert_eq!(png_size(&dir.join("cb.png")), (40, 30));
-    assert_eq!(png_size(&dir.join("cb_rate.png")), (40, 30));
+    // The rate image: the render's pixels, then its legend (a title and a colour bar).
+    let legend = raypack::render::colorbar::title_height() + raypack::render::colorbar::height();
+    assert_eq!(png_size(&dir.join("cb_rate.png")), (40, 30 + legend as u32));
     // Only the outputs: no temporary files left behind.
     assert_eq!(names(&dir), ["cb.exr", "cb.png", "cb_rate.png"]);
     std::fs::remove_dir_all(&dir).unwrap();

@@ -76,6 +76,34 @@ pub fn rate_film(spp: &[u32], width: usize, height: usize, max_samples: u32) -> 
     film
 }
 
+/// The sample-rate image as 8-bit RGB with its legend beneath (cargo feature `image`): the
+/// pixels of [`rate_film`] and a colour bar drawn with the same [`rate_colour`] from 0 to
+/// `max_samples` samples per pixel, labelled with round counts and the mean count. Returns
+/// the width, the height and the bytes; the image's rows come first, so that its pixels line
+/// up with the render's.
+#[cfg(feature = "image")]
+pub fn rate_image(spp: &[u32], width: usize, height: usize, max_samples: u32) -> (usize, usize, Vec<u8>) {
+    use super::colorbar;
+    let film = rate_film(spp, width, height, max_samples);
+    let (title_h, bar_h) = (colorbar::title_height(), colorbar::height());
+    let h = height + title_h + bar_h;
+    let mut rgb = film.to_rgb8(super::Encoding::Display);
+    rgb.resize(width * h * 3, 255);
+    let scale = colorbar::Scale::Linear { max: max_samples as f64 };
+    let mean = spp.iter().map(|&n| n as f64).sum::<f64>() / spp.len().max(1) as f64;
+    let to_rgb = |c: Vec3| [c.x, c.y, c.z].map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8);
+    colorbar::draw_title(
+        &mut rgb[width * height * 3..width * (height + title_h) * 3],
+        width,
+        "SAMPLES PER PIXEL",
+        &scale,
+    );
+    colorbar::draw(&mut rgb[width * (height + title_h) * 3..], width, &scale, Some(mean), |f| {
+        to_rgb(rate_colour(f as f32))
+    });
+    (width, h, rgb)
+}
+
 /// `<out>_rate.png` beside the image `out` (CS184's name for the rate image).
 pub fn rate_path(out: &Path) -> PathBuf {
     let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();

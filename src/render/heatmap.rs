@@ -7,7 +7,8 @@
 //! `nodes` is [`TraversalCounts::nodes`] (inner nodes visited, each an 8-box test) and `tests`
 //! is [`TraversalCounts::blocks`] (primitive blocks tested, each up to M triangles or 4
 //! spheres at once). The image maps a count linearly onto viridis, 0 to the largest count of
-//! the view, with a colour bar labelled with the counts below it ([`super::colorbar`]).
+//! the view (or its logarithm, or up to a percentile: [`HeatmapScale`]), each half titled, with
+//! a colour bar labelled with round counts and the mean below it ([`super::colorbar`]).
 
 use super::camera::CameraRays;
 #[cfg(feature = "image")]
@@ -140,28 +141,65 @@ fn saturate(n: u64) -> u32 {
 pub struct HeatmapImage {
     /// Width in pixels.
     pub width: usize,
-    /// Height in pixels (the image's plus the colour bar's).
+    /// Height in pixels (the title's, the image's and the colour bar's).
     pub height: usize,
     /// `width × height × 3` bytes.
     pub rgb: Vec<u8>,
+    /// The row at which the counts' pixels start (below the title).
+    pub top: usize,
+}
+
+/// How counts map to colours.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum HeatmapScale {
+    /// Linear from 0 to the largest count.
+    #[default]
+    Linear,
+    /// `ln(1 + count)`: the many cheap pixels spread over the colours when a few are costly.
+    Log,
+    /// Linear from 0 to this percentile of the counts (in (0, 100]); counts above it in the
+    /// top colour.
+    Percentile(f64),
 }
 
 /// The viridis colour of `count` on a scale from 0 to `max` (`max` 0: everything is 0).
 #[cfg(feature = "image")]
 pub fn colour(count: u32, max: u32) -> [u8; 3] {
     let f = if max == 0 { 0.0 } else { count as f64 / max as f64 };
+    viridis(f)
+}
+
+#[cfg(feature = "image")]
+fn viridis(f: f64) -> [u8; 3] {
     colorous::VIRIDIS.eval_continuous(f.clamp(0.0, 1.0)).as_array()
+}
+
+/// The `p`-th percentile of `counts` (nearest rank; 0 for none).
+pub fn percentile(counts: &[u32], p: f64) -> u32 {
+    if counts.is_empty() {
+        return 0;
+    }
+    let mut sorted = counts.to_vec();
+    let rank = ((p.clamp(0.0, 100.0) / 100.0 * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
+    *sorted.select_nth_unstable(rank - 1).1
 }
 
 #[cfg(feature = "image")]
 impl HeatmapCounts {
-    /// The image of `view`: counts coloured by [`colour`] with a labelled colour bar beneath.
+    /// The image of `view` on a linear scale ([`HeatmapCounts::image_scaled`]).
     pub fn image(&self, view: HeatmapView) -> HeatmapImage {
+        self.image_scaled(view, HeatmapScale::Linear)
+    }
+
+    /// The image of `view`: each half with its title above ("nodes visited", "primitive-block
+    /// tests") and its colour bar beneath, labelled with round values, the mean marked on it.
+    pub fn image_scaled(&self, view: HeatmapView, scale: HeatmapScale) -> HeatmapImage {
         match view {
-            HeatmapView::Nodes => self.one(&self.nodes),
-            HeatmapView::Tests => self.one(&self.tests),
+            HeatmapView::Nodes => self.one(&self.nodes, "NODES VISITED", scale),
+            HeatmapView::Tests => self.one(&self.tests, "PRIMITIVE-BLOCK TESTS", scale),
             HeatmapView::Both => {
-                let (a, b) = (self.one(&self.nodes), self.one(&self.tests));
+                let (a, b) =
+                    (self.one(&self.nodes, "NODES VISITED", scale), self.one(&self.tests, "BLOCK TESTS", scale));
                 let gap = 4;
                 let width = a.width + gap + b.width;
                 let mut rgb = vec![255u8; width * a.height * 3];
@@ -170,23 +208,31 @@ impl HeatmapCounts {
                     row[..a.width * 3].copy_from_slice(&a.rgb[y * a.width * 3..(y + 1) * a.width * 3]);
                     row[(a.width + gap) * 3..].copy_from_slice(&b.rgb[y * b.width * 3..(y + 1) * b.width * 3]);
                 }
-                HeatmapImage { width, height: a.height, rgb }
+                HeatmapImage { width, height: a.height, rgb, top: a.top }
             }
         }
     }
 
-    fn one(&self, counts: &[u32]) -> HeatmapImage {
-        let max = counts.iter().copied().max().unwrap_or(0);
-        let bar_h = colorbar::height();
-        let (w, h) = (self.width, self.height + bar_h);
+    fn one(&self, counts: &[u32], title: &str, scale: HeatmapScale) -> HeatmapImage {
+        let max = counts.iter().copied().max().unwrap_or(0) as f64;
+        let bar_scale = match scale {
+            HeatmapScale::Linear => colorbar::Scale::Linear { max },
+            HeatmapScale::Log => colorbar::Scale::Log { max },
+            HeatmapScale::Percentile(p) => {
+                colorbar::Scale::Clipped { top: percentile(counts, p) as f64, percentile: p }
+            }
+        };
+        let mean = counts.iter().map(|&c| c as f64).sum::<f64>() / counts.len().max(1) as f64;
+        let (title_h, bar_h) = (colorbar::title_height(), colorbar::height());
+        let (w, h) = (self.width, title_h + self.height + bar_h);
         let mut rgb = vec![255u8; w * h * 3];
+        colorbar::draw_title(&mut rgb[..w * title_h * 3], w, title, &bar_scale);
+        let image = &mut rgb[w * title_h * 3..w * (title_h + self.height) * 3];
         for (i, &c) in counts.iter().enumerate() {
-            rgb[i * 3..i * 3 + 3].copy_from_slice(&colour(c, max));
+            image[i * 3..i * 3 + 3].copy_from_slice(&viridis(bar_scale.fraction(c as f64)));
         }
-        colorbar::draw(&mut rgb[self.width * self.height * 3..], w, max, |f| {
-            colorous::VIRIDIS.eval_continuous(f).as_array()
-        });
-        HeatmapImage { width: w, height: h, rgb }
+        colorbar::draw(&mut rgb[w * (title_h + self.height) * 3..], w, &bar_scale, Some(mean), viridis);
+        HeatmapImage { width: w, height: h, rgb, top: title_h }
     }
 }
 

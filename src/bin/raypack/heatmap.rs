@@ -5,7 +5,7 @@ use crate::say;
 use crate::{CliError, RenderArgs, commit, load, print_warnings};
 use clap::ValueEnum;
 use raypack::BuildOptions;
-use raypack::render::heatmap::{self, HeatmapRays, HeatmapView};
+use raypack::render::heatmap::{self, HeatmapRays, HeatmapScale, HeatmapView};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -27,6 +27,19 @@ pub(crate) enum RaysArg {
     Camera,
     /// From each camera ray's hit, an occlusion ray toward the scene's first light.
     Shadow,
+}
+
+/// Parses `--heatmap-scale`: `linear`, `log` or `pNN` (a percentile in (0, 100]).
+pub(crate) fn parse_scale(s: &str) -> Result<HeatmapScale, String> {
+    match s.trim().to_ascii_lowercase().as_str() {
+        "linear" => Ok(HeatmapScale::Linear),
+        "log" => Ok(HeatmapScale::Log),
+        p if p.starts_with('p') => match p[1..].parse::<f64>() {
+            Ok(v) if v > 0.0 && v <= 100.0 => Ok(HeatmapScale::Percentile(v)),
+            _ => Err(format!("'{s}': a percentile is p followed by a number in (0, 100], e.g. p99")),
+        },
+        _ => Err(format!("'{s}': expected linear, log or pNN (a percentile, e.g. p99)")),
+    }
 }
 
 /// Renders the heatmap `a` asks for. Sampling flags (-s, -l, -m, -a, -H) do not apply.
@@ -94,7 +107,7 @@ pub(crate) fn cmd_heatmap(a: RenderArgs) -> Result<(), CliError> {
             stat(&counts.nodes),
             stat(&counts.tests)
         ));
-        let image = counts.image(view);
+        let image = counts.image_scaled(view, a.heatmap_scale.unwrap_or_default());
         let bytes = raypack::render::film::encode_png(image.width, image.height, &image.rgb)
             .map_err(|message| raypack::render::ImageError::Encode { path: output.clone(), message })?;
         if to_stdout {

@@ -256,6 +256,12 @@ struct RenderArgs {
     /// [default: camera].
     #[arg(long, value_enum)]
     heatmap_rays: Option<heatmap::RaysArg>,
+    /// With --integrator heatmap: how counts map to colours: `linear` (0 to the largest
+    /// count), `log` (ln(1 + count): the cheap pixels spread out when a few are costly), or
+    /// `pNN` (linear up to the NN-th percentile, e.g. p99; above it the top colour)
+    /// [default: linear].
+    #[arg(long, value_name = "SCALE", value_parser = heatmap::parse_scale)]
+    heatmap_scale: Option<raypack::render::heatmap::HeatmapScale>,
     /// Never terminate paths early by Russian roulette (only -m ends them).
     #[arg(long)]
     no_russian_roulette: bool,

@@ -232,8 +232,10 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             let mut files = vec![stage(&output, &out_opts, &mut |w| w.write_all(&image))?];
             if let (Some(rate), Some((batch, tol))) = (&rate_path, settings.adaptive) {
                 let spp = settings.samples_per_pixel;
-                let film = render::adaptive::rate_film(&out.samples_per_pixel, window.width(), window.height(), spp);
-                let bytes = encode(&film, rate, render::ImageFormat::Png, render::Encoding::Display)?;
+                let (w, h, rgb) =
+                    render::adaptive::rate_image(&out.samples_per_pixel, window.width(), window.height(), spp);
+                let bytes = render::film::encode_png(w, h, &rgb)
+                    .map_err(|message| render::ImageError::Encode { path: rate.clone(), message })?;
                 files.push(stage(rate, &out_opts, &mut |w| w.write_all(&bytes))?);
                 if !quiet {
                     say::more(format_args!("(sample rate: {}, batch {batch}, tolerance {tol}) ", rate.display()));
@@ -291,8 +293,14 @@ fn parse_window(a: &RenderArgs, width: usize, height: usize) -> Result<Option<re
 /// Refuses flags that this render would ignore: the heatmap's outside `--integrator
 /// heatmap`, and an image name with `--write-camera` (which renders nothing).
 fn check_ignored_flags(a: &RenderArgs) -> Result<(), CliError> {
-    if a.heatmap.is_some() || a.heatmap_rays.is_some() {
-        let flag = if a.heatmap.is_some() { "--heatmap" } else { "--heatmap-rays" };
+    if a.heatmap.is_some() || a.heatmap_rays.is_some() || a.heatmap_scale.is_some() {
+        let flag = if a.heatmap.is_some() {
+            "--heatmap"
+        } else if a.heatmap_rays.is_some() {
+            "--heatmap-rays"
+        } else {
+            "--heatmap-scale"
+        };
         return Err(CliError::Usage(format!("{flag} applies only with --integrator heatmap")));
     }
     if let (Some(out), Some(_)) = (&a.output, &a.write_camera) {
