@@ -57,11 +57,16 @@ fn report_svgs_parse_and_show_every_result() {
         let end = start + html[start..].find("</svg>").unwrap() + "</svg>".len();
         let doc = roxmltree::Document::parse(&html[start..end]).expect("the SVG parses");
         texts.extend(doc.descendants().filter_map(|n| n.text()).map(str::to_owned));
-        assert!(out.join(format!("chart{svgs}.png")).exists());
         svgs += 1;
     }
-    // Two inputs × their thread counts, the ratio, build time and size.
-    assert_eq!(svgs, 2 * 2 + 3);
+    // A chart per ray set (each with a panel per input and thread count), the ratio, build
+    // time and size; each as a PNG named for what it shows, linked under its SVG.
+    assert_eq!(svgs, 2 + 3);
+    let pngs: Vec<&str> = html.split("<a href=\"").skip(1).map(|r| &r[..r.find('"').unwrap()]).collect();
+    assert_eq!(pngs, ["rays-primary.png", "rays-shadow.png", "ratio.png", "build-time.png", "build-bytes.png"]);
+    for png in &pngs {
+        assert!(out.join(png).exists(), "{png}");
+    }
     let all = texts.join("\n");
     for r in old["results"].as_array().unwrap() {
         for key in ["rays", "method"] {

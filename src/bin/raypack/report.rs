@@ -8,11 +8,18 @@
 //! ratio is computed from "results". Every text from a JSON is escaped in the HTML (and by
 //! plotters in the SVG).
 //!
+//! The charts: one per ray set (`rays-primary.png`, `rays-diffuse.png`, ...), a row per method
+//! sorted closest-hit then occlusion calls, by family (one ray per call, 8- and 16-wide
+//! packets, streams, ...: a hue each) and raypack's kernel beside Embree's calls of its kind
+//! (solid and light), a panel per input and thread count; the ratio of the best of each
+//! tracer (`ratio.png`); the build times (`build-time.png`) and the trees' sizes
+//! (`build-bytes.png`). Every bar has its whisker (slowest to fastest run or build) where the
+//! JSON has the spread, and its figure beside it; labels sit in their own column.
+//!
 //! Charts are drawn in memory and written with `index.html` through [`raypack::fs::output`],
 //! all or nothing: never through a link or into a FIFO planted in the directory. Building them
-//! is linear in the results; a chart shows at most [`MAX_SERIES`] bars per group (the fastest
-//! series, the others counted in its legend), and a report of more groups or charts than can
-//! be read is an error.
+//! is linear in the results; a chart shows at most [`MAX_ROWS`] rows (the fastest, the others
+//! counted beneath), and a report of more panels or charts than can be read is an error.
 //!
 //! Text is laid out with a TrueType font read from the system (DejaVu Sans, Debian's
 //! `fonts-dejavu-core`); without one the report is a clear error.
@@ -22,6 +29,8 @@ mod input;
 use crate::CliError;
 use input::{Input, Row, read_input};
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+use raypack::raysets::RaySetKind;
 use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -33,11 +42,11 @@ const FONTS: [&str; 3] = [
     "/usr/share/fonts/dejavu/DejaVuSans.ttf",
 ];
 
-/// Most bars per group of one chart: the fastest series are drawn, the others counted in the
-/// legend (beyond this many, bars a few pixels wide cannot be told apart).
-pub(crate) const MAX_SERIES: usize = 24;
-/// Most groups along one chart's x axis (ray sets, or ray sets × thread counts).
-const MAX_GROUPS: usize = 32;
+/// Most rows (methods, builds, ray sets) of one chart: the fastest are drawn, the others
+/// counted in a note beneath (beyond this many, a chart is taller than a screen).
+pub(crate) const MAX_ROWS: usize = 48;
+/// Most panels side by side in one chart (inputs × thread counts).
+const MAX_PANELS: usize = 8;
 /// Most charts of one report.
 const MAX_CHARTS: usize = 64;
 
@@ -50,65 +59,585 @@ fn numbers(v: &Option<Vec<f64>>) -> String {
     v.as_ref().map_or_else(|| "unknown".into(), |a| format!("{a:?}"))
 }
 
-/// The colour of series `i` of `n` in `family`: raypack's methods in blues, Embree's in
-/// oranges, other series (one per input) from a categorical palette.
-fn colour(family: Family, i: usize, n: usize) -> RGBColor {
-    let c = match family {
-        // Shades from the middle of the sequential maps: light enough to tell apart, dark
-        // enough to see on white.
-        Family::Raypack => colorous::BLUES.eval_rational(i + n / 2 + 2, n + n / 2 + 3),
-        Family::Embree => colorous::ORANGES.eval_rational(i + n / 2 + 2, n + n / 2 + 3),
-        Family::Input => colorous::TABLEAU10[i % colorous::TABLEAU10.len()],
-    };
-    RGBColor(c.r, c.g, c.b)
+/// What kind of call a method is: its family decides the hue of its bars, so that each of
+/// raypack's kernels stands beside the Embree calls of its kind in the same hue.
+const FAMILIES: [(&str, RGBColor); 7] = [
+    ("1 ray per call", RGBColor(0x4e, 0x79, 0xa7)),
+    ("8-wide packets", RGBColor(0xf2, 0x8e, 0x2b)),
+    ("16-wide packets", RGBColor(0x59, 0xa1, 0x4f)),
+    ("streams", RGBColor(0xb0, 0x7a, 0xa1)),
+    ("interleaved streams", RGBColor(0xe1, 0x57, 0x59)),
+    ("scalar reference (binary BVH)", RGBColor(0x8c, 0x8c, 0x8c)),
+    ("other", RGBColor(0x9c, 0x75, 0x5f)),
+];
+
+/// The colour of raypack's figures where a chart has no families (builds, ratios).
+const RAYPACK: RGBColor = FAMILIES[0].1;
+
+/// Embree's bars: the family's hue, lighter (and outlined in it), beside raypack's solid one.
+fn light(c: RGBColor) -> RGBColor {
+    let mix = |v: u8| ((v as u32 + 2 * 255) / 3) as u8;
+    RGBColor(mix(c.0), mix(c.1), mix(c.2))
 }
 
-#[derive(Clone, Copy, PartialEq)]
-enum Family {
-    Raypack,
-    Embree,
-    Input,
-}
-
-/// One bar per group: its name, colour family, and per group the value and the spread
-/// (slowest and fastest run) drawn as a whisker.
-struct Series {
+/// How a method sorts in its chart: closest-hit calls before occlusion calls, then by family,
+/// then by the BVH quality in its name's parentheses, raypack before Embree, plain before
+/// coherent.
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord)]
+struct MethodKey {
+    occluded: bool,
+    family: usize,
+    quality: String,
+    embree: bool,
+    coherent: bool,
     name: String,
-    family: Family,
-    values: Vec<Option<f64>>,
-    ranges: Vec<Option<(f64, f64)>>,
 }
 
-/// A grouped bar chart: `groups` along x, one bar per series in each.
-struct Bars {
-    title: String,
-    y_label: String,
-    groups: Vec<String>,
-    series: Vec<Series>,
-    /// Series left out (beyond [`MAX_SERIES`]) and the largest value among them.
-    left_out: Option<(usize, f64)>,
-    /// A horizontal reference line (the ratio chart's 1.0).
-    line: Option<f64>,
-}
-
-impl Bars {
-    /// A chart of `series` over `groups`, keeping the [`MAX_SERIES`] series with the largest
-    /// values (in their order) and counting the rest.
-    fn new(title: String, y_label: &str, groups: Vec<String>, series: Vec<Series>, line: Option<f64>) -> Self {
-        let top = |s: &Series| s.values.iter().flatten().copied().fold(f64::NEG_INFINITY, f64::max);
-        let (series, left_out) = if series.len() > MAX_SERIES {
-            let mut order: Vec<usize> = (0..series.len()).collect();
-            order.sort_by(|&a, &b| top(&series[b]).total_cmp(&top(&series[a])));
-            let mut keep = vec![false; series.len()];
-            order[..MAX_SERIES].iter().for_each(|&i| keep[i] = true);
-            let best_left = order[MAX_SERIES..].iter().map(|&i| top(&series[i])).fold(f64::NEG_INFINITY, f64::max);
-            let n = series.len() - MAX_SERIES;
-            (series.into_iter().zip(keep).filter(|(_, k)| *k).map(|(s, _)| s).collect(), Some((n, best_left)))
-        } else {
-            (series, None)
-        };
-        Bars { title, y_label: y_label.into(), groups, series, left_out, line }
+fn method_key(tracer: &str, method: &str) -> MethodKey {
+    let lower = method.to_ascii_lowercase();
+    let (base, quality) = match (lower.rfind(" ("), lower.ends_with(')')) {
+        (Some(at), true) => (&lower[..at], lower[at..].to_string()),
+        _ => (lower.as_str(), String::new()),
+    };
+    let width = base.trim_end_matches(" coherent");
+    let family = if base.contains("reference") {
+        5
+    } else if base.contains("interleaved") {
+        4
+    } else if base.contains("stream") {
+        3
+    } else if width.ends_with("16") {
+        2
+    } else if width.ends_with('8') {
+        1
+    } else if width.ends_with('1') {
+        0
+    } else {
+        6
+    };
+    MethodKey {
+        occluded: base.contains("occluded"),
+        family,
+        quality,
+        embree: tracer == "embree",
+        coherent: base.ends_with(" coherent"),
+        name: method.to_string(),
     }
+}
+
+/// One bar: the figure and its spread (slowest and fastest run), drawn as a whisker.
+#[derive(Clone, Copy)]
+struct Bar {
+    value: f64,
+    range: Option<(f64, f64)>,
+}
+
+/// One row of a chart: its label, its colour and, per panel, its bar.
+struct HRow {
+    label: String,
+    colour: RGBColor,
+    /// Drawn light (Embree's figures).
+    light: bool,
+    /// The first row of a section ("closest hit"): the section's name is drawn above it.
+    section: Option<String>,
+    bars: Vec<Option<Bar>>,
+}
+
+/// A horizontal bar chart: one row per method (or build, or ray set), one panel per input
+/// and thread count, the labels on the left where they never overlap.
+struct Chart {
+    /// The PNG file's name in the report directory.
+    file: String,
+    title: String,
+    /// What the x axis measures.
+    unit: String,
+    panels: Vec<String>,
+    rows: Vec<HRow>,
+    /// The legend: name, colour, drawn light.
+    legend: Vec<(String, RGBColor, bool)>,
+    /// A vertical reference line (the ratio chart's 1.0).
+    line: Option<f64>,
+    /// What is not drawn (rows beyond [`MAX_ROWS`]).
+    note: Option<String>,
+}
+
+impl Chart {
+    /// Keeps the [`MAX_ROWS`] rows with the largest figures (in their order) and says how many
+    /// were left out and the largest among them.
+    fn keep_fastest(&mut self, what: &str) {
+        if self.rows.len() <= MAX_ROWS {
+            return;
+        }
+        let top = |r: &HRow| r.bars.iter().flatten().map(|b| b.value).fold(f64::NEG_INFINITY, f64::max);
+        let mut order: Vec<usize> = (0..self.rows.len()).collect();
+        order.sort_by(|&a, &b| top(&self.rows[b]).total_cmp(&top(&self.rows[a])));
+        let mut keep = vec![false; self.rows.len()];
+        order[..MAX_ROWS].iter().for_each(|&i| keep[i] = true);
+        let best_left = order[MAX_ROWS..].iter().map(|&i| top(&self.rows[i])).fold(f64::NEG_INFINITY, f64::max);
+        let n = self.rows.len() - MAX_ROWS;
+        let rows = std::mem::take(&mut self.rows);
+        self.rows = rows.into_iter().zip(keep).filter(|(_, k)| *k).map(|(r, _)| r).collect();
+        self.note = Some(format!("and {n} slower {what}, at most {best_left:.3} (not drawn)"));
+    }
+}
+
+/// Layout, in pixels.
+const ROW: i32 = 18;
+const BAR: i32 = 12;
+const PANEL: i32 = 330;
+const GAP: i32 = 24;
+const FONT_SIZE: f64 = 13.0;
+
+/// A round axis end and tick step for figures up to `max`: steps of 1, 2 or 5 times a power
+/// of ten, four to eight ticks.
+fn axis(max: f64) -> (f64, f64) {
+    let max = if max.is_finite() && max > 0.0 { max } else { 1.0 };
+    let raw = max / 5.0;
+    let p = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 5.0, 10.0].into_iter().map(|m| m * p).find(|s| *s >= raw).unwrap_or(10.0 * p);
+    ((max / step).ceil() * step, step)
+}
+
+/// `v` with as many decimals as the tick step needs.
+fn tick_text(v: f64, step: f64) -> String {
+    let decimals = if step >= 1.0 { 0 } else { (-step.log10().floor()) as usize };
+    format!("{v:.decimals$}")
+}
+
+/// A figure beside its bar: three significant digits.
+fn value_text(v: f64) -> String {
+    let a = v.abs();
+    if a >= 100.0 {
+        format!("{v:.0}")
+    } else if a >= 10.0 {
+        format!("{v:.1}")
+    } else if a >= 1.0 {
+        format!("{v:.2}")
+    } else {
+        format!("{v:.3}")
+    }
+}
+
+/// The width of the label column: the longest label's, within bounds.
+fn label_width<DB: DrawingBackend>(root: &DrawingArea<DB, plotters::coord::Shift>, c: &Chart) -> i32 {
+    let font = ("sans-serif", FONT_SIZE).into_font();
+    let widest =
+        c.rows.iter().filter_map(|r| root.estimate_text_size(&r.label, &font.color(&BLACK)).ok()).map(|(w, _)| w).max();
+    (widest.unwrap_or(60) as i32 + 16).clamp(80, 420)
+}
+
+/// The legend's rows: entries laid out left to right, wrapped at `width`.
+fn legend_lines(c: &Chart, width: i32) -> Vec<Vec<usize>> {
+    let mut lines: Vec<Vec<usize>> = vec![Vec::new()];
+    let mut x = 0;
+    for (i, (name, _, _)) in c.legend.iter().enumerate() {
+        let w = 24 + (name.chars().count() as i32 * 7) + 18;
+        if x + w > width && !lines.last().unwrap().is_empty() {
+            lines.push(Vec::new());
+            x = 0;
+        }
+        lines.last_mut().unwrap().push(i);
+        x += w;
+    }
+    lines
+}
+
+/// The chart's size in pixels.
+fn chart_size(c: &Chart, label_w: i32) -> (u32, u32) {
+    let w = 20 + label_w + c.panels.len().max(1) as i32 * (PANEL + GAP);
+    let sections = c.rows.iter().filter(|r| r.section.is_some()).count() as i32;
+    let legend = legend_lines(c, w - 40).len() as i32;
+    let h =
+        header_height(legend) + (c.rows.len() as i32 + sections) * ROW + 60 + if c.note.is_some() { ROW } else { 0 };
+    (w as u32, h as u32)
+}
+
+fn header_height(legend_lines: i32) -> i32 {
+    36 + legend_lines * ROW + 44
+}
+
+fn draw<DB: DrawingBackend>(
+    root: DrawingArea<DB, plotters::coord::Shift>,
+    c: &Chart,
+    label_w: i32,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let e = |x: &dyn std::fmt::Display| x.to_string();
+    root.fill(&WHITE).map_err(|x| e(&x))?;
+    let (w, h) = root.dim_in_pixel();
+    let (w, h) = (w as i32, h as i32);
+    let font = ("sans-serif", FONT_SIZE).into_font();
+    let small = ("sans-serif", FONT_SIZE - 2.0).into_font();
+    let grey = RGBColor(0xdd, 0xdd, 0xdd);
+    // Title and legend.
+    root.draw(&Text::new(
+        c.title.clone(),
+        (20, 18),
+        ("sans-serif", 17).into_font().color(&BLACK).pos(Pos::new(HPos::Left, VPos::Center)),
+    ))
+    .map_err(|x| e(&x))?;
+    let lines = legend_lines(c, w - 40);
+    for (li, line) in lines.iter().enumerate() {
+        let y = 36 + li as i32 * ROW + ROW / 2;
+        let mut x = 20;
+        for &i in line {
+            let (name, colour, is_light) = &c.legend[i];
+            let fill = if *is_light { light(*colour) } else { *colour };
+            root.draw(&Rectangle::new([(x, y - 6), (x + 16, y + 6)], fill.filled())).map_err(|x| e(&x))?;
+            root.draw(&Rectangle::new([(x, y - 6), (x + 16, y + 6)], colour.stroke_width(1))).map_err(|x| e(&x))?;
+            root.draw(&Text::new(name.clone(), (x + 22, y), anchored(HPos::Left, &font))).map_err(|x| e(&x))?;
+            let tw =
+                root.estimate_text_size(name, &font.color(&BLACK)).map_or(name.len() as i32 * 7, |(w, _)| w as i32);
+            x += 22 + tw + 18;
+        }
+    }
+    let top = header_height(lines.len() as i32);
+    // Where each row sits: sections take a row of their own for their name.
+    let mut ys = Vec::with_capacity(c.rows.len());
+    let mut y = top;
+    for r in &c.rows {
+        if let Some(s) = &r.section {
+            root.draw(&Text::new(
+                s.clone(),
+                (20, y + ROW / 2),
+                anchored(HPos::Left, &("sans-serif", FONT_SIZE + 1.0, FontStyle::Bold).into_font()),
+            ))
+            .map_err(|x| e(&x))?;
+            y += ROW;
+        }
+        ys.push(y + ROW / 2);
+        y += ROW;
+    }
+    let bottom = y;
+    for (r, &yc) in c.rows.iter().zip(&ys) {
+        root.draw(&Text::new(r.label.clone(), (20 + label_w - 8, yc), anchored(HPos::Right, &font)))
+            .map_err(|x| e(&x))?;
+    }
+    for (pi, title) in c.panels.iter().enumerate() {
+        let x0 = 20 + label_w + pi as i32 * (PANEL + GAP);
+        let plot_w = PANEL - 50;
+        let max = c
+            .rows
+            .iter()
+            .filter_map(|r| r.bars.get(pi).copied().flatten())
+            .map(|b| b.range.map_or(b.value, |(_, hi)| hi.max(b.value)))
+            .fold(c.line.unwrap_or(0.0), f64::max);
+        let (end, step) = axis(max);
+        let px = |v: f64| x0 + ((v / end).clamp(0.0, 1.0) * plot_w as f64).round() as i32;
+        root.draw(&Text::new(
+            title.clone(),
+            (x0 + plot_w / 2, top - 30),
+            anchored(HPos::Center, &("sans-serif", FONT_SIZE, FontStyle::Bold).into_font()),
+        ))
+        .map_err(|x| e(&x))?;
+        // Grid and ticks: round values, top and bottom.
+        let mut t = 0.0;
+        while t <= end + step * 1e-9 {
+            let x = px(t);
+            root.draw(&PathElement::new(vec![(x, top - 4), (x, bottom)], grey.stroke_width(1))).map_err(|x| e(&x))?;
+            for ty in [top - 12, bottom + 10] {
+                root.draw(&Text::new(tick_text(t, step), (x, ty), anchored(HPos::Center, &small)))
+                    .map_err(|x| e(&x))?;
+            }
+            t += step;
+        }
+        root.draw(&Text::new(c.unit.clone(), (x0 + plot_w / 2, bottom + 28), anchored(HPos::Center, &font)))
+            .map_err(|x| e(&x))?;
+        root.draw(&PathElement::new(vec![(x0, top - 4), (x0, bottom)], BLACK.stroke_width(1))).map_err(|x| e(&x))?;
+        for (r, &yc) in c.rows.iter().zip(&ys) {
+            let Some(b) = r.bars.get(pi).copied().flatten() else {
+                root.draw(&Text::new("–".to_string(), (x0 + 6, yc), anchored(HPos::Left, &small)))
+                    .map_err(|x| e(&x))?;
+                continue;
+            };
+            let fill = if r.light { light(r.colour) } else { r.colour };
+            let (y0, y1) = (yc - BAR / 2, yc + BAR / 2);
+            root.draw(&Rectangle::new([(x0, y0), (px(b.value).max(x0 + 1), y1)], fill.filled())).map_err(|x| e(&x))?;
+            if r.light {
+                root.draw(&Rectangle::new([(x0, y0), (px(b.value).max(x0 + 1), y1)], r.colour.stroke_width(1)))
+                    .map_err(|x| e(&x))?;
+            }
+            let mut text_x = px(b.value);
+            if let Some((lo, hi)) = b.range {
+                let (a, z) = (px(lo), px(hi));
+                root.draw(&PathElement::new(vec![(a, yc), (z, yc)], BLACK.stroke_width(1))).map_err(|x| e(&x))?;
+                for x in [a, z] {
+                    root.draw(&PathElement::new(vec![(x, yc - 4), (x, yc + 4)], BLACK.stroke_width(1)))
+                        .map_err(|x| e(&x))?;
+                }
+                text_x = text_x.max(z);
+            }
+            root.draw(&Text::new(value_text(b.value), (text_x + 4, yc), anchored(HPos::Left, &small)))
+                .map_err(|x| e(&x))?;
+        }
+        if let Some(l) = c.line {
+            let x = px(l);
+            root.draw(&PathElement::new(vec![(x, top - 4), (x, bottom)], BLACK.stroke_width(2))).map_err(|x| e(&x))?;
+        }
+    }
+    if let Some(note) = &c.note {
+        root.draw(&Text::new(note.clone(), (20, h - ROW), anchored(HPos::Left, &font))).map_err(|x| e(&x))?;
+    }
+    root.present().map_err(|x| e(&x))
+}
+
+/// Black text of `font`, centred vertically on its position and anchored horizontally by `h`.
+fn anchored<'a>(h: HPos, font: &FontDesc<'a>) -> TextStyle<'a> {
+    font.color(&BLACK).pos(Pos::new(h, VPos::Center))
+}
+
+/// A ray set's name as part of a file name: lower-case letters, digits and dashes.
+fn file_part(name: &str) -> String {
+    let s: String =
+        name.chars().map(|c| if c.is_ascii_alphanumeric() { c.to_ascii_lowercase() } else { '-' }).take(40).collect();
+    let s = s.trim_matches('-').to_string();
+    if s.is_empty() { "unnamed".into() } else { s }
+}
+
+/// "1 thread", "2 threads".
+fn threads_text(t: u64) -> String {
+    if t == 1 { "1 thread".into() } else { format!("{t} threads") }
+}
+
+/// The legend of the family hues present in `keys`, raypack solid and Embree light.
+fn family_legend(keys: &[MethodKey]) -> Vec<(String, RGBColor, bool)> {
+    let mut out = Vec::new();
+    for (f, (name, colour)) in FAMILIES.iter().enumerate() {
+        if keys.iter().any(|k| k.family == f) {
+            out.push((name.to_string(), *colour, false));
+        }
+    }
+    if keys.iter().any(|k| k.embree) {
+        out.push(("raypack: solid".into(), RGBColor(0x55, 0x55, 0x55), false));
+        out.push(("Embree: light".into(), RGBColor(0x55, 0x55, 0x55), true));
+    }
+    out
+}
+
+/// The charts of `inputs`: one per ray set (a row per method, a panel per input and thread
+/// count), the ratio of the best of each tracer, the build times and the trees' sizes.
+/// Linear in the results.
+fn charts(inputs: &[Input]) -> Result<Vec<Chart>, CliError> {
+    let mut out = Vec::new();
+    let many = inputs.len() > 1;
+    // Ray sets in first-seen order, over all inputs.
+    let mut sets = Index::default();
+    for inp in inputs {
+        for r in &inp.rows {
+            sets.add(&r.rays);
+        }
+    }
+    if sets.names.len() + 3 > MAX_CHARTS {
+        return Err(CliError::Usage(format!(
+            "{} ray sets ({}, ...), a chart each: more than the {MAX_CHARTS} charts a report holds",
+            sets.names.len(),
+            sets.names[..3].join(", ")
+        )));
+    }
+    let mut files = HashMap::new();
+    for set in &sets.names {
+        // Panels: (input, thread count) in order; rows: methods.
+        let mut panels: Vec<(usize, u64)> = Vec::new();
+        let mut panel_at: HashMap<(usize, u64), usize> = HashMap::new();
+        let mut methods: HashMap<(String, String), usize> = HashMap::new();
+        let mut keys: Vec<MethodKey> = Vec::new();
+        let mut cells: Vec<(usize, usize, Bar)> = Vec::new();
+        for (ii, inp) in inputs.iter().enumerate() {
+            let mut threads: Vec<u64> = inp.rows.iter().filter(|r| &r.rays == set).map(|r| r.threads).collect();
+            threads.sort_unstable();
+            threads.dedup();
+            for t in threads {
+                panel_at.insert((ii, t), panels.len());
+                panels.push((ii, t));
+            }
+            for r in inp.rows.iter().filter(|r| &r.rays == set) {
+                let m = *methods.entry((r.tracer.clone(), r.method.clone())).or_insert_with(|| {
+                    keys.push(method_key(&r.tracer, &r.method));
+                    keys.len() - 1
+                });
+                cells.push((panel_at[&(ii, r.threads)], m, Bar { value: r.mrays, range: r.range }));
+            }
+        }
+        if panels.len() > MAX_PANELS {
+            return Err(CliError::Usage(format!(
+                "ray set {set}: {} inputs and thread counts, a panel each: a chart shows at most {MAX_PANELS}; report \
+                 fewer files or thread counts at once",
+                panels.len()
+            )));
+        }
+        let mut bars = vec![vec![None; panels.len()]; keys.len()];
+        // The first row of a method, ray set and thread count counts.
+        for (p, m, b) in cells.into_iter().rev() {
+            bars[m][p] = Some(b);
+        }
+        let mut order: Vec<usize> = (0..keys.len()).collect();
+        order.sort_by(|&a, &b| keys[a].cmp(&keys[b]));
+        let section = |k: &MethodKey| if k.occluded { "any hit (occluded)" } else { "closest hit (intersect)" };
+        let mut rows = Vec::with_capacity(order.len());
+        let mut last: Option<bool> = None;
+        for &m in &order {
+            let k = &keys[m];
+            let both = keys.iter().any(|k| k.occluded) && keys.iter().any(|k| !k.occluded);
+            rows.push(HRow {
+                label: k.name.clone(),
+                colour: FAMILIES[k.family].1,
+                light: k.embree,
+                section: (both && last != Some(k.occluded)).then(|| section(k).to_string()),
+                bars: std::mem::take(&mut bars[m]),
+            });
+            last = Some(k.occluded);
+        }
+        let panels = panels
+            .iter()
+            .map(|&(ii, t)| if many { format!("{}, {}", inputs[ii].label, threads_text(t)) } else { threads_text(t) })
+            .collect();
+        let title = if many {
+            format!("{set} rays: Mrays/s, higher is better")
+        } else {
+            format!("{}: {set} rays, Mrays/s (higher is better), ISA {}", inputs[0].label, shown(&inputs[0].isa))
+        };
+        let mut legend = family_legend(&keys);
+        if rows.iter().any(|r| r.bars.iter().flatten().any(|b| b.range.is_some())) {
+            legend.push(("whisker: slowest to fastest run".into(), BLACK, true));
+        }
+        let mut file = format!("rays-{}", file_part(set));
+        let n = files.entry(file.clone()).or_insert(0usize);
+        *n += 1;
+        if *n > 1 {
+            file = format!("{file}-{n}");
+        }
+        let mut chart = Chart {
+            file: format!("{file}.png"),
+            title,
+            unit: "Mrays/s".into(),
+            panels,
+            rows,
+            legend,
+            line: None,
+            note: None,
+        };
+        chart.keep_fastest("methods");
+        out.push(chart);
+    }
+    out.push(ratio_chart(inputs)?);
+    out.extend(build_charts(inputs)?);
+    Ok(out)
+}
+
+/// The ratio of raypack's best to Embree's best per ray set and thread count, a panel per
+/// input, with the bench summary's spread as whiskers.
+fn ratio_chart(inputs: &[Input]) -> Result<Chart, CliError> {
+    let mut groups = Index::default();
+    let mut per_input = Vec::with_capacity(inputs.len());
+    for inp in inputs {
+        let mut best: HashMap<usize, (Option<f64>, Option<f64>)> = HashMap::new();
+        for r in &inp.rows {
+            let g = groups.add(&format!("{}, {}", r.rays, threads_text(r.threads)));
+            let b = best.entry(g).or_default();
+            let slot = if r.tracer == "embree" { &mut b.1 } else { &mut b.0 };
+            *slot = Some(slot.map_or(r.mrays, |x: f64| x.max(r.mrays)));
+        }
+        // The spread is the bench summary's (raypack's slowest run over Embree's fastest, and
+        // its fastest over Embree's slowest), when the JSON has one.
+        let mut spread = HashMap::new();
+        for s in &inp.summary {
+            if let (Some(&g), Some(r)) =
+                (groups.at.get(&format!("{}, {}", s.rays, threads_text(s.threads))), s.ratio_range)
+            {
+                spread.entry(g).or_insert(r);
+            }
+        }
+        per_input.push((best, spread));
+    }
+    check_panels(inputs.len(), "the ratio chart")?;
+    let rows = groups
+        .names
+        .iter()
+        .enumerate()
+        .map(|(g, name)| HRow {
+            label: name.clone(),
+            colour: RAYPACK,
+            light: false,
+            section: None,
+            bars: per_input
+                .iter()
+                .map(|(best, spread)| match best.get(&g) {
+                    Some((Some(a), Some(b))) if *b > 0.0 => Some(Bar { value: a / b, range: spread.get(&g).copied() }),
+                    _ => None,
+                })
+                .collect(),
+        })
+        .collect();
+    let mut chart = Chart {
+        file: "ratio.png".into(),
+        title: "best raypack / best Embree on the same rays and threads (1.0: as fast; above: raypack faster)".into(),
+        unit: "ratio".into(),
+        panels: inputs.iter().map(|i| i.label.clone()).collect(),
+        rows,
+        legend: vec![("whisker: the ratio's range over the runs".into(), BLACK, true)],
+        line: Some(1.0),
+        note: None,
+    };
+    chart.keep_fastest("rows");
+    Ok(chart)
+}
+
+/// Build time (with the fastest and slowest build as whiskers) and the trees' bytes per
+/// triangle: a row per tree, a panel per input.
+fn build_charts(inputs: &[Input]) -> Result<Vec<Chart>, CliError> {
+    let mut names = Index::default();
+    for inp in inputs {
+        for b in &inp.builds {
+            names.add(&b.name);
+        }
+    }
+    check_panels(inputs.len(), "the build charts")?;
+    let mut out = Vec::new();
+    for (file, title, unit, seconds) in [
+        ("build-time.png", "Acceleration structure builds on all threads (lower is better)", "seconds", true),
+        ("build-bytes.png", "Acceleration structure size (lower is smaller)", "bytes per triangle", false),
+    ] {
+        let mut rows: Vec<HRow> = names
+            .names
+            .iter()
+            .map(|n| HRow {
+                label: n.clone(),
+                colour: RAYPACK,
+                light: n.starts_with("embree"),
+                section: None,
+                bars: vec![None; inputs.len()],
+            })
+            .collect();
+        for (ii, inp) in inputs.iter().enumerate() {
+            for b in &inp.builds {
+                let value = if seconds { b.seconds } else { b.bytes_per_triangle };
+                let range = if seconds { b.seconds_range } else { None };
+                rows[names.at[&b.name]].bars[ii] = value.map(|value| Bar { value, range });
+            }
+        }
+        let mut legend = vec![("raypack".to_string(), RAYPACK, false)];
+        if rows.iter().any(|r| r.light) {
+            legend.push(("Embree".into(), RAYPACK, true));
+        }
+        if seconds {
+            legend.push(("whisker: fastest to slowest build".into(), BLACK, true));
+        }
+        let mut chart = Chart {
+            file: file.into(),
+            title: title.into(),
+            unit: unit.into(),
+            panels: inputs.iter().map(|i| i.label.clone()).collect(),
+            rows,
+            legend,
+            line: None,
+            note: None,
+        };
+        chart.keep_fastest("structures");
+        out.push(chart);
+    }
+    Ok(out)
 }
 
 /// Names in first-seen order, each with its index: linear where `Vec::contains` was
@@ -130,225 +659,14 @@ impl Index {
     }
 }
 
-/// Width of the legend column beside the plot, in pixels.
-const LEGEND_WIDTH: u32 = 320;
-/// Height of one legend entry, in pixels.
-const LEGEND_ROW: u32 = 15;
-
-/// The chart's size in pixels: 960 wide plus the legend column, tall enough for the legend.
-fn chart_size(b: &Bars) -> (u32, u32) {
-    (960 + LEGEND_WIDTH, 420.max(90 + LEGEND_ROW * b.series.len() as u32))
-}
-
-fn draw<DB: DrawingBackend>(root: DrawingArea<DB, plotters::coord::Shift>, b: &Bars) -> Result<(), String>
-where
-    DB::ErrorType: 'static,
-{
-    let e = |x: &dyn std::fmt::Display| x.to_string();
-    root.fill(&WHITE).map_err(|x| e(&x))?;
-    let (w, _) = root.dim_in_pixel();
-    let (plot, legend) = root.split_horizontally(w - LEGEND_WIDTH);
-    let top = b.series.iter().flat_map(|s| s.values.iter().zip(&s.ranges)).filter_map(|(v, r)| match (v, r) {
-        (_, Some((_, hi))) => Some(*hi),
-        (Some(v), None) => Some(*v),
-        _ => None,
-    });
-    let max = top.fold(b.line.unwrap_or(0.0), f64::max);
-    let n = b.groups.len().max(1) as f64;
-    let mut chart = ChartBuilder::on(&plot)
-        .caption(&b.title, ("sans-serif", 18))
-        .margin(10)
-        .x_label_area_size(10)
-        .y_label_area_size(60)
-        .build_cartesian_2d(-0.5..n - 0.5, 0.0..max * 1.15 + 1e-9)
-        .map_err(|x| e(&x))?;
-    chart.configure_mesh().disable_x_mesh().disable_x_axis().y_desc(&b.y_label).draw().map_err(|x| e(&x))?;
-    let k = b.series.len().max(1) as f64;
-    let bw = 0.8 / k;
-    let mut count = [0usize; 3];
-    b.series.iter().for_each(|s| count[s.family as usize] += 1);
-    let mut index = [0usize; 3];
-    let mut colours = Vec::new();
-    for (si, s) in b.series.iter().enumerate() {
-        let i = &mut index[s.family as usize];
-        let c = colour(s.family, *i, count[s.family as usize]);
-        *i += 1;
-        colours.push(c);
-        let x0 = |gi: usize| gi as f64 - 0.4 + si as f64 * bw;
-        chart
-            .draw_series(
-                s.values.iter().enumerate().filter_map(|(gi, v)| {
-                    v.map(|v| Rectangle::new([(x0(gi), 0.0), (x0(gi) + bw * 0.9, v)], c.filled()))
-                }),
-            )
-            .map_err(|x| e(&x))?;
-        chart
-            .draw_series(s.ranges.iter().enumerate().filter_map(|(gi, r)| {
-                let xm = x0(gi) + bw * 0.45;
-                r.map(|(lo, hi)| PathElement::new(vec![(xm, lo), (xm, hi)], BLACK.stroke_width(1)))
-            }))
-            .map_err(|x| e(&x))?;
-    }
-    if let Some(l) = b.line {
-        chart.draw_series(LineSeries::new([(-0.5, l), (n - 0.5, l)], BLACK.stroke_width(2))).map_err(|x| e(&x))?;
-    }
-    chart
-        .draw_series(
-            b.groups
-                .iter()
-                .enumerate()
-                .map(|(gi, g)| Text::new(g.clone(), (gi as f64 - 0.1, max * 1.1), ("sans-serif", 14))),
-        )
-        .map_err(|x| e(&x))?;
-    // The legend: its own column, so that it never hides a bar.
-    let y0 = 40;
-    for (si, (s, c)) in b.series.iter().zip(&colours).enumerate() {
-        let y = y0 + si as i32 * LEGEND_ROW as i32;
-        legend.draw(&Rectangle::new([(6, y), (18, y + 10)], c.filled())).map_err(|x| e(&x))?;
-        legend.draw(&Text::new(s.name.clone(), (24, y - 1), ("sans-serif", 12))).map_err(|x| e(&x))?;
-    }
-    let mut y = y0 + b.series.len() as i32 * LEGEND_ROW as i32 + 6;
-    if let Some((n, best)) = b.left_out {
-        let what = format!("and {n} slower series, at most {best:.3} (not drawn)");
-        legend.draw(&Text::new(what, (24, y - 1), ("sans-serif", 12))).map_err(|x| e(&x))?;
-        y += LEGEND_ROW as i32;
-    }
-    if b.series.iter().any(|s| s.ranges.iter().any(Option::is_some)) {
-        legend.draw(&PathElement::new(vec![(12, y), (12, y + 12)], BLACK.stroke_width(1))).map_err(|x| e(&x))?;
-        legend
-            .draw(&Text::new("slowest to fastest run".to_string(), (24, y), ("sans-serif", 12)))
-            .map_err(|x| e(&x))?;
-    }
-    root.present().map_err(|x| e(&x))
-}
-
-/// Refuses a chart of more groups than [`MAX_GROUPS`].
-fn check_groups(groups: &[String], what: &str) -> Result<(), CliError> {
-    if groups.len() > MAX_GROUPS {
+/// Refuses a chart of more panels than [`MAX_PANELS`].
+fn check_panels(n: usize, what: &str) -> Result<(), CliError> {
+    if n > MAX_PANELS {
         return Err(CliError::Usage(format!(
-            "{what}: {} groups ({}, ...) in one chart; a chart shows at most {MAX_GROUPS}: report fewer ray sets or \
-             thread counts at once",
-            groups.len(),
-            groups[..3].join(", ")
+            "{what}: {n} inputs, a panel each: a chart shows at most {MAX_PANELS}; report fewer files at once"
         )));
     }
     Ok(())
-}
-
-/// The charts of `inputs`: Mrays/s per input and thread count, the ratio, the builds. Linear
-/// in the results.
-fn charts(inputs: &[Input]) -> Result<Vec<Bars>, CliError> {
-    let mut out = Vec::new();
-    for inp in inputs {
-        // Rows by thread count, in increasing order.
-        let mut by_threads: std::collections::BTreeMap<u64, Vec<&Row>> = Default::default();
-        for r in &inp.rows {
-            by_threads.entry(r.threads).or_default().push(r);
-        }
-        if by_threads.len() + out.len() > MAX_CHARTS {
-            return Err(CliError::Usage(format!(
-                "{}: {} thread counts, a chart each: more than the {MAX_CHARTS} charts a report holds",
-                inp.label,
-                by_threads.len()
-            )));
-        }
-        for (t, rows) in by_threads {
-            let (mut groups, mut names) = (Index::default(), Index::default());
-            let mut cells: Vec<(usize, usize, &Row)> = Vec::with_capacity(rows.len());
-            for r in rows {
-                let g = groups.add(&r.rays);
-                let s = names.add(&format!("{}: {}", r.tracer, r.method));
-                cells.push((s, g, r));
-            }
-            check_groups(&groups.names, &inp.label)?;
-            let ng = groups.names.len();
-            let mut series: Vec<Series> = names
-                .names
-                .into_iter()
-                .map(|name| Series {
-                    family: if name.starts_with("embree") { Family::Embree } else { Family::Raypack },
-                    name,
-                    values: vec![None; ng],
-                    ranges: vec![None; ng],
-                })
-                .collect();
-            // The first row of a method and ray set counts, as before.
-            for (s, g, r) in cells.into_iter().rev() {
-                series[s].values[g] = Some(r.mrays);
-                series[s].ranges[g] = r.range;
-            }
-            let title = format!("{} — {t} thread(s), ISA {}", inp.label, shown(&inp.isa));
-            out.push(Bars::new(title, "Mrays/s", groups.names, series, None));
-        }
-    }
-    // The ratio raypack-best / Embree-best per ray set and thread count, one series per input.
-    let mut groups = Index::default();
-    // Per input: per group, the best raypack and Embree figures, and the summary's spread.
-    let mut per_input = Vec::with_capacity(inputs.len());
-    for inp in inputs {
-        let mut best: HashMap<usize, (Option<f64>, Option<f64>)> = HashMap::new();
-        for r in &inp.rows {
-            let g = groups.add(&format!("{} {}t", r.rays, r.threads));
-            let b = best.entry(g).or_default();
-            let slot = if r.tracer == "embree" { &mut b.1 } else { &mut b.0 };
-            *slot = Some(slot.map_or(r.mrays, |x: f64| x.max(r.mrays)));
-        }
-        // The spread is the bench summary's (raypack's slowest run over Embree's fastest, and
-        // its fastest over Embree's slowest), when the JSON has one.
-        let mut spread = HashMap::new();
-        for s in &inp.summary {
-            if let (Some(&g), Some(r)) = (groups.at.get(&format!("{} {}t", s.rays, s.threads)), s.ratio_range) {
-                spread.entry(g).or_insert(r);
-            }
-        }
-        per_input.push((best, spread));
-    }
-    check_groups(&groups.names, "the ratio chart")?;
-    let ng = groups.names.len();
-    let series: Vec<Series> = inputs
-        .iter()
-        .zip(&per_input)
-        .map(|(inp, (best, spread))| Series {
-            name: inp.label.clone(),
-            family: Family::Input,
-            values: (0..ng)
-                .map(|g| match best.get(&g) {
-                    Some((Some(a), Some(b))) if *b > 0.0 => Some(a / b),
-                    _ => None,
-                })
-                .collect(),
-            ranges: (0..ng).map(|g| spread.get(&g).copied()).collect(),
-        })
-        .collect();
-    out.push(Bars::new("best raypack / best Embree (1.0: as fast)".into(), "ratio", groups.names, series, Some(1.0)));
-    // Build time and bytes per triangle.
-    let mut groups = Index::default();
-    for inp in inputs {
-        for b in &inp.builds {
-            groups.add(&b.name);
-        }
-    }
-    check_groups(&groups.names, "the build charts")?;
-    for (what, seconds) in [("build time (s)", true), ("bytes per triangle", false)] {
-        let series = inputs
-            .iter()
-            .map(|inp| {
-                let mut values = vec![None; groups.names.len()];
-                for b in &inp.builds {
-                    values[groups.at[&b.name]] = if seconds { b.seconds } else { b.bytes_per_triangle };
-                }
-                Series { name: inp.label.clone(), family: Family::Input, ranges: vec![None; values.len()], values }
-            })
-            .collect();
-        out.push(Bars::new(what.into(), what, groups.names.clone(), series, None));
-    }
-    if out.len() > MAX_CHARTS {
-        return Err(CliError::Usage(format!(
-            "{} charts: more than the {MAX_CHARTS} a report holds; report fewer files at once",
-            out.len()
-        )));
-    }
-    Ok(out)
 }
 
 fn register_font() -> Result<(), CliError> {
@@ -370,9 +688,15 @@ fn output_options(inputs: &[PathBuf]) -> raypack::fs::output::OutputOptions {
     raypack::fs::output::OutputOptions { allow_fifo: false, ..raypack::fs::output::OutputOptions::protecting(&inputs) }
 }
 
-/// The names a report writes in its directory: `index.html` and `chartN.png`.
+/// The names a report writes in its directory, as far as they are known before the results:
+/// `index.html`, the ratio and build charts, and the charts of the built-in ray sets and of a
+/// `--rays` file.
 fn report_files(dir: &Path) -> impl Iterator<Item = PathBuf> + '_ {
-    std::iter::once(dir.join("index.html")).chain((0..MAX_CHARTS).map(|i| dir.join(format!("chart{i}.png"))))
+    let fixed = ["index.html", "ratio.png", "build-time.png", "build-bytes.png"].map(String::from);
+    use RaySetKind::*;
+    let kinds = [Primary, Diffuse, Shadow, Random, EdgesVertices, File];
+    let sets = kinds.into_iter().map(|k| format!("rays-{}.png", file_part(k.name())));
+    fixed.into_iter().chain(sets).map(|n| dir.join(n))
 }
 
 /// Makes the report directory `dir` (if missing) and checks, before any work, that the
@@ -449,18 +773,29 @@ pub(crate) fn write_report(inputs: &[PathBuf], out: &Path) -> Result<(), CliErro
     }
     let opts = output_options(inputs);
     let mut files = Vec::new();
-    for (i, chart) in charts.iter().enumerate() {
+    for chart in &charts {
+        let png_path = out.join(&chart.file);
+        // The label column is measured with the font once, on a drawing area of any size.
+        let label_w = {
+            let mut probe = String::new();
+            label_width(&SVGBackend::with_string(&mut probe, (10, 10)).into_drawing_area(), chart)
+        };
+        let size = chart_size(chart, label_w);
         let mut svg = String::new();
-        let size = chart_size(chart);
-        draw(SVGBackend::with_string(&mut svg, size).into_drawing_area(), chart).map_err(CliError::Usage)?;
-        let png_path = out.join(format!("chart{i}.png"));
+        draw(SVGBackend::with_string(&mut svg, size).into_drawing_area(), chart, label_w).map_err(CliError::Usage)?;
         let mut rgb = vec![0u8; size.0 as usize * size.1 as usize * 3];
-        draw(BitMapBackend::with_buffer(&mut rgb, size).into_drawing_area(), chart)
+        draw(BitMapBackend::with_buffer(&mut rgb, size).into_drawing_area(), chart, label_w)
             .map_err(|m| CliError::Usage(format!("{}: {m}", png_path.display())))?;
         let png = raypack::render::film::encode_png(size.0 as usize, size.1 as usize, &rgb)
             .map_err(|message| raypack::render::ImageError::Encode { path: png_path.clone(), message })?;
         files.push(stage(&png_path, &opts, &mut |w| w.write_all(&png))?);
-        let _ = write!(html, "<h3>{}</h3>\n{svg}\n<p><a href=\"chart{i}.png\">PNG</a></p>\n", esc(&chart.title));
+        let _ = write!(
+            html,
+            "<h3>{}</h3>\n{svg}\n<p><a href=\"{}\">{}</a></p>\n",
+            esc(&chart.title),
+            esc(&chart.file),
+            esc(&chart.file)
+        );
     }
     html.push_str("</body></html>\n");
     files.push(stage(&out.join("index.html"), &opts, &mut |w| w.write_all(html.as_bytes()))?);

@@ -36,6 +36,8 @@ pub(super) struct Build {
     pub name: String,
     pub seconds: Option<f64>,
     pub bytes_per_triangle: Option<f64>,
+    /// The fastest and slowest build, when the JSON has them.
+    pub seconds_range: Option<(f64, f64)>,
 }
 
 /// One bench JSON, every field typed (`None`: absent or null, shown as "unknown").
@@ -231,6 +233,7 @@ pub(super) fn read_input(path: &Path) -> Result<Input, CliError> {
             name: name.clone(),
             seconds: b.number("seconds")?,
             bytes_per_triangle: b.number("bytes_per_triangle")?,
+            seconds_range: b.number("seconds_min")?.zip(b.number("seconds_max")?),
         });
     }
     let resolution = match j.array("resolution")? {
