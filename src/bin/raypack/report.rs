@@ -87,7 +87,7 @@ fn light(c: RGBColor) -> RGBColor {
 struct MethodKey {
     occluded: bool,
     family: usize,
-    quality: String,
+    quality: (u8, String),
     embree: bool,
     coherent: bool,
     name: String,
@@ -118,11 +118,17 @@ fn method_key(tracer: &str, method: &str) -> MethodKey {
     MethodKey {
         occluded: base.contains("occluded"),
         family,
-        quality,
+        quality: (quality_rank(&quality), quality),
         embree: tracer == "embree",
         coherent: base.ends_with(" coherent"),
         name: method.to_string(),
     }
+}
+
+/// BVH qualities in the order of their effort: fast, medium, high, then anything else.
+fn quality_rank(text: &str) -> u8 {
+    let lower = text.to_ascii_lowercase();
+    ["fast", "medium", "high"].iter().position(|q| lower.contains(q)).map_or(3, |i| i as u8)
 }
 
 /// One bar: the figure and its spread (slowest and fastest run), drawn as a whisker.
@@ -244,7 +250,9 @@ fn legend_lines(c: &Chart, width: i32) -> Vec<Vec<usize>> {
 
 /// The chart's size in pixels.
 fn chart_size(c: &Chart, label_w: i32) -> (u32, u32) {
-    let w = 20 + label_w + c.panels.len().max(1) as i32 * (PANEL + GAP);
+    // Wide enough for the title (17-pixel type, under 10 pixels a character).
+    let title_w = 40 + c.title.chars().count() as i32 * 10;
+    let w = (20 + label_w + c.panels.len().max(1) as i32 * (PANEL + GAP)).max(title_w);
     let sections = c.rows.iter().filter(|r| r.section.is_some()).count() as i32;
     let legend = legend_lines(c, w - 40).len() as i32;
     let h =
@@ -594,14 +602,19 @@ fn build_charts(inputs: &[Input]) -> Result<Vec<Chart>, CliError> {
         }
     }
     check_panels(inputs.len(), "the build charts")?;
+    // Each of raypack's trees beside Embree's of the same effort.
+    let mut order: Vec<usize> = (0..names.names.len()).collect();
+    order.sort_by_key(|&i| (quality_rank(&names.names[i]), names.names[i].starts_with("embree"), i));
+    let mut row_of = vec![0; order.len()];
+    order.iter().enumerate().for_each(|(r, &i)| row_of[i] = r);
     let mut out = Vec::new();
     for (file, title, unit, seconds) in [
         ("build-time.png", "Acceleration structure builds on all threads (lower is better)", "seconds", true),
         ("build-bytes.png", "Acceleration structure size (lower is smaller)", "bytes per triangle", false),
     ] {
-        let mut rows: Vec<HRow> = names
-            .names
+        let mut rows: Vec<HRow> = order
             .iter()
+            .map(|&i| &names.names[i])
             .map(|n| HRow {
                 label: n.clone(),
                 colour: RAYPACK,
@@ -614,7 +627,7 @@ fn build_charts(inputs: &[Input]) -> Result<Vec<Chart>, CliError> {
             for b in &inp.builds {
                 let value = if seconds { b.seconds } else { b.bytes_per_triangle };
                 let range = if seconds { b.seconds_range } else { None };
-                rows[names.at[&b.name]].bars[ii] = value.map(|value| Bar { value, range });
+                rows[row_of[names.at[&b.name]]].bars[ii] = value.map(|value| Bar { value, range });
             }
         }
         let mut legend = vec![("raypack".to_string(), RAYPACK, false)];
