@@ -157,8 +157,8 @@ pub enum HeatmapScale {
     Linear,
     /// `ln(1 + count)`: the many cheap pixels spread over the colours when a few are costly.
     Log,
-    /// Linear from 0 to this percentile of the counts (in (0, 100]); counts above it in the
-    /// top colour.
+    /// Linear from 0 to this percentile (in (0, 100]) of the nonzero counts ([`percentile`]);
+    /// counts above it in the top colour.
     Percentile(f64),
 }
 
@@ -174,12 +174,14 @@ fn viridis(f: f64) -> [u8; 3] {
     colorous::VIRIDIS.eval_continuous(f.clamp(0.0, 1.0)).as_array()
 }
 
-/// The `p`-th percentile of `counts` (nearest rank; 0 for none).
+/// The `p`-th percentile of the nonzero `counts` (nearest rank; 0 when there are none): of
+/// the pixels whose ray did any work, so that the pixels that see nothing (no block tests
+/// where the camera ray misses) do not pull it to 0.
 pub fn percentile(counts: &[u32], p: f64) -> u32 {
-    if counts.is_empty() {
+    let mut sorted: Vec<u32> = counts.iter().copied().filter(|&c| c > 0).collect();
+    if sorted.is_empty() {
         return 0;
     }
-    let mut sorted = counts.to_vec();
     let rank = ((p.clamp(0.0, 100.0) / 100.0 * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
     *sorted.select_nth_unstable(rank - 1).1
 }
