@@ -18,7 +18,9 @@ fn thread_counts_are_capped_at_a_multiple_of_the_cpus() {
     expect(&["render", "-t", &too_many, "-r", "16", "12", "-f", s(&out)], 2, &want);
     assert!(!out.exists());
     expect(&["info", "-t", &too_many, "--quality", "fast"], 2, &want);
-    expect(&["bench", "-t", &format!("1,{too_many}"), "-r", "16", "12", "--runs", "1"], 2, &want);
+    expect(&["bench", "-t", &too_many, "-r", "16", "12", "--runs", "1"], 2, &want);
+    let list = format!("--threads-list {too_many}: expected 1 to {max} threads");
+    expect(&["bench", "--threads-list", &format!("1,{too_many}"), "-r", "16", "12", "--runs", "1"], 2, &list);
     expect(&["render", "--integrator", "heatmap", "-t", &too_many, "-r", "16", "12", "-f", s(&out)], 2, &want);
     // The cap itself is allowed.
     let r = run(&["render", "-q", "-t", &max.to_string(), "-r", "16", "12", "-f", s(&out)]);

@@ -925,7 +925,7 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     // `-t N` is checked as on every command; in `--threads-list`, 0 means all cores.
     crate::machine::check_threads(a.threads)?;
     for &t in a.threads_list.iter().filter(|&&t| t > 0) {
-        crate::machine::check_threads(Some(t))?;
+        raypack::methods::check_threads(t).map_err(|e| CliError::Usage(format!("--threads-list {t}: {e}")))?;
     }
     let threads = match (a.threads, a.threads_list.is_empty()) {
         (Some(t), _) => vec![t],
