@@ -292,9 +292,18 @@ where
         let mut x = 20;
         for &i in line {
             let (name, colour, is_light) = &c.legend[i];
-            let fill = if *is_light { light(*colour) } else { *colour };
-            root.draw(&Rectangle::new([(x, y - 6), (x + 16, y + 6)], fill.filled())).map_err(|x| e(&x))?;
-            root.draw(&Rectangle::new([(x, y - 6), (x + 16, y + 6)], colour.stroke_width(1))).map_err(|x| e(&x))?;
+            if name.starts_with("whisker") {
+                // Drawn as the whiskers are: a line with end caps.
+                root.draw(&PathElement::new(vec![(x, y), (x + 16, y)], BLACK.stroke_width(1))).map_err(|x| e(&x))?;
+                for cap in [x, x + 16] {
+                    root.draw(&PathElement::new(vec![(cap, y - 4), (cap, y + 4)], BLACK.stroke_width(1)))
+                        .map_err(|x| e(&x))?;
+                }
+            } else {
+                let fill = if *is_light { light(*colour) } else { *colour };
+                root.draw(&Rectangle::new([(x, y - 6), (x + 16, y + 6)], fill.filled())).map_err(|x| e(&x))?;
+                root.draw(&Rectangle::new([(x, y - 6), (x + 16, y + 6)], colour.stroke_width(1))).map_err(|x| e(&x))?;
+            }
             root.draw(&Text::new(name.clone(), (x + 22, y), anchored(HPos::Left, &font))).map_err(|x| e(&x))?;
             let tw =
                 root.estimate_text_size(name, &font.color(&BLACK)).map_or(name.len() as i32 * 7, |(w, _)| w as i32);
