@@ -114,7 +114,8 @@ impl Scale {
     }
 
     /// Round tick values within the bar: 0 and multiples of 1, 2 or 5 × 10^k on a linear
-    /// bar (four to ten of them), 0, 1, 2, 5, 10, 20, 50, ... on a log bar.
+    /// bar (the smallest such step that gives at most five intervals), 0, 1, 2, 5, 10, 20,
+    /// 50, ... on a log bar.
     pub fn ticks(&self) -> Vec<u64> {
         let end = self.end();
         if !(end >= 1.0) {
@@ -302,7 +303,8 @@ mod tests {
 
     #[test]
     fn ticks_are_round() {
-        assert_eq!(Scale::Linear { max: 1234.0 }.ticks(), [0, 200, 400, 600, 800, 1000, 1200]);
+        assert_eq!(Scale::Linear { max: 1234.0 }.ticks(), [0, 500, 1000]);
+        assert_eq!(Scale::Linear { max: 512.0 }.ticks(), [0, 200, 400]);
         assert_eq!(Scale::Linear { max: 37.0 }.ticks(), [0, 10, 20, 30]);
         assert_eq!(Scale::Linear { max: 3.0 }.ticks(), [0, 1, 2, 3]);
         assert_eq!(Scale::Log { max: 700.0 }.ticks(), [0, 1, 2, 5, 10, 20, 50, 100, 200, 500]);
