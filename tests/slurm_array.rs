@@ -1,21 +1,20 @@
-//! The README's Slurm-array loop ("More than one machine") runs as written from the
+//! The Slurm-array loop of docs/more-than-one-machine.md runs as written from the
 //! repository's root: four parts rendered by `tools/slurm/render-array.sh` as four tasks of a
 //! job array, merged by its `--merge`, equal one whole render byte for byte (`cmp`).
 
 use std::path::Path;
 use std::process::Command;
 
-/// The ```bash block of the README's "More than one machine" section.
-fn readme_loop() -> String {
-    let readme = include_str!("../README.md");
-    let section = readme.split("## More than one machine").nth(1).expect("the section").split("\n## ").next().unwrap();
-    let block = section.split("```bash\n").nth(1).expect("a ```bash block");
+/// The ```bash block of docs/more-than-one-machine.md.
+fn guide_loop() -> String {
+    let page = include_str!("../docs/more-than-one-machine.md");
+    let block = page.split("```bash\n").nth(1).expect("a ```bash block");
     block.split("```").next().unwrap().to_string()
 }
 
 #[test]
-fn the_readme_slurm_loop_merges_into_the_whole_render() {
-    let script = readme_loop();
+fn the_guides_slurm_loop_merges_into_the_whole_render() {
+    let script = guide_loop();
     assert!(script.contains("SLURM_ARRAY_TASK_ID=$i") && script.contains("cmp"), "{script}");
     // Run in a scratch directory holding the repository's tools/ and scenes/, with the
     // binary under test first on PATH.

@@ -1,4 +1,4 @@
-"""The README's Python examples run as written (doctest on its ```pycon blocks)."""
+"""The Python examples of the README and of docs/ run as written (doctest on their ```pycon blocks)."""
 
 from __future__ import annotations
 
@@ -11,25 +11,27 @@ from conftest import REPO
 
 
 def blocks():
+    """The ```pycon blocks of the README's Python section and of every page of docs/."""
     text = (REPO / "README.md").read_text()
+    sections = [text.split("## Python", 1)[1].split("\n## ", 1)[0]]
+    sections += [p.read_text() for p in sorted((REPO / "docs").glob("*.md"))]
     found = []
-    for heading in ("## Python", "## More than one machine"):
-        section = text.split(heading, 1)[1].split("\n## ", 1)[0]
+    for section in sections:
         found += re.findall(r"```pycon\n(.*?)```", section, flags=re.S)
     return found
 
 
 def test_readme_has_python_examples():
-    assert len(blocks()) >= 2
+    assert len(blocks()) >= 3
 
 
 @pytest.mark.parametrize("index", range(len(blocks())))
 def test_readme_example(index, monkeypatch):
     source = blocks()[index]
     if "trimesh" in source:
-        pytest.importorskip("trimesh", reason="SKIPPED: the README's trimesh example needs trimesh (pip install trimesh)")
+        pytest.importorskip("trimesh", reason="SKIPPED: the trimesh example (docs/trimesh.md) needs trimesh (pip install trimesh)")
     if "dask" in source:
-        pytest.importorskip("distributed", reason="SKIPPED: the README's Dask example needs dask (pip install pyraypack[dask])")
+        pytest.importorskip("distributed", reason="SKIPPED: the Dask example (docs/more-than-one-machine.md) needs dask (pip install pyraypack[dask])")
     # The examples name the repository's files relative to its root.
     monkeypatch.chdir(REPO)
     test = doctest.DocTestParser().get_doctest(source, {}, f"README.md python block {index}", "README.md", 0)
