@@ -1,8 +1,9 @@
 //! The README says what is true: its library example is `examples/library.rs` (which `cargo test
 //! --all-targets` compiles), its flag tables list every flag of every command and no other, its
-//! speed tables are `tools/speed-table`'s output on the JSON kept in docs/speed/, and its CBbunny
-//! command runs as written. (Its Python examples: python/tests/test_readme.py; the Slurm loop of
-//! docs/more-than-one-machine.md: tests/slurm_array.rs; its two commands: .ci/run.)
+//! speed tables are `tools/speed-table`'s output on the JSON kept in docs/speed/, and its first
+//! command and its CBbunny line run as written. (Its Python examples: python/tests/test_readme.py;
+//! the Slurm loop of docs/more-than-one-machine.md: tests/slurm_array.rs; `bash tools/test` and
+//! `pip install .`: .ci/run.)
 
 mod common;
 
@@ -139,5 +140,21 @@ fn the_readme_cbbunny_command_runs_as_written() {
     for name in ["bunny.png", "bunny_rate.png"] {
         assert!(std::fs::metadata(dir.join(name)).map(|m| m.len() > 0).unwrap_or(false), "{line}: no {name}");
     }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn the_readme_first_command_renders_the_built_in_box() {
+    // The first ```sh block: `cargo run --release -- ARGS`, run here as the built binary.
+    let section = README.split("## Two commands for a fresh machine").nth(1).expect("the section");
+    let block = section.split("```sh\n").nth(1).unwrap().split("```").next().unwrap().trim();
+    let args = block.strip_prefix("cargo run --release -- ").unwrap_or_else(|| panic!("not `cargo run`: {block}"));
+    let dir = std::env::temp_dir().join(format!("raypack-readme-first-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out =
+        Command::new(env!("CARGO_BIN_EXE_raypack")).args(args.split_whitespace()).current_dir(&dir).output().unwrap();
+    assert!(out.status.success(), "{block}: {}", String::from_utf8_lossy(&out.stderr));
+    let png = std::fs::read(dir.join("cornell.png")).expect("the README's command writes cornell.png");
+    assert!(png.starts_with(b"\x89PNG"), "{block}: not a PNG");
     std::fs::remove_dir_all(&dir).unwrap();
 }
