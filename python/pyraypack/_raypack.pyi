@@ -66,8 +66,8 @@ class Scene:
     ``vertices`` is an ``(N, 3)`` array of positions (any real dtype, rounded to float32),
     ``faces`` an ``(M, 3)`` integer array of vertex indices; any memory layout. Faces that
     cannot be traced (NaN/Inf or huge coordinates, zero area, collinear corners) are dropped,
-    counted in ``report`` and announced by a ``SceneWarning``; ``prim`` ids still index the
-    ``faces`` given. ``quality`` is the BVH build effort, ``watertight`` selects the
+    counted in ``report`` and announced by a ``SceneWarning``; they are never hit, and
+    ``prim`` ids and ``Scene.faces`` stay those of the faces given. ``quality`` is the BVH build effort, ``watertight`` selects the
     watertight triangle test (no ray slips through a shared edge), ``bvh_cache`` a directory
     where the BVH is saved and reloaded, ``threads`` the build's threads (default: all cores).
 
@@ -159,14 +159,17 @@ class Scene:
         """True when the BVH was read from the cache rather than built."""
     @property
     def vertices(self) -> npt.NDArray[np.float32]:
-        """The committed triangles' vertex positions ``(N, 3)`` float32 (a copy)."""
+        """The vertex positions ``(N, 3)`` float32 (a copy)."""
     @property
     def faces(self) -> npt.NDArray[np.int64]:
-        """The committed triangles ``(M, 3)`` int64 (a copy). A loaded scene's ``prim`` ids
-        index these rows."""
+        """The faces ``(M, 3)`` int64 (a copy) as given to ``Scene`` or as the file holds them
+        (polygons as triangles), the dropped ones included: ``prim`` ids index these rows (a
+        sphere's ``prim`` is ``M`` plus its index among the scene's spheres)."""
     def __dask_tokenize__(self) -> str:
         """A token of the scene's contents, for Dask."""
-    def __reduce__(self) -> tuple[object, tuple[bytes, bytes | None, tuple[int, int, int, int, int]]]:
+    def __reduce__(
+        self,
+    ) -> tuple[object, tuple[bytes, bytes | None, tuple[int, int, int, int, int], bytes | None]]:
         """Pickling: the scene travels whole, BVH included (about the BVH's size plus the
         geometry's), and is checked on unpickling as a cache file from another user is; an
         unpickled scene is never rebuilt."""
@@ -181,7 +184,9 @@ def load(
 ) -> Scene:
     """Loads a scene file (``.dae``, ``.obj``, ``.ply``) and commits it. Raises
     ``FileNotFoundError`` for a missing file and ``ValueError`` naming the file and the line or
-    element for a malformed one; loader warnings become ``SceneWarning``s."""
+    element for a malformed one; loader warnings become ``SceneWarning``s. A file without
+    lights gets the CLI's default light rig for ``render`` without a warning (ray casting
+    does not use lights; ``render(path)`` says so)."""
 
 def render(
     scene: Scene | _Path,
@@ -222,7 +227,7 @@ def _bvh_builds() -> int:
     """How many BVHs this process has built (cache and pickle loads do not count)."""
 
 def _scene_from_snapshot(
-    snapshot: bytes, prim_map: bytes | None, report: tuple[int, int, int, int, int]
+    snapshot: bytes, kept: bytes | None, report: tuple[int, int, int, int, int], dropped: bytes | None = None
 ) -> Scene:
     """Unpickles a ``Scene`` (``Scene.__reduce__``), checking the snapshot first."""
 
@@ -234,7 +239,8 @@ def _ray_sets(
 def _intersect_stream(
     scene: Scene, origins: _Points, directions: _Points, tnear: float = 0.0, tfar: float = ...
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.int64], npt.NDArray[np.float32], npt.NDArray[np.float32]]:
-    """The rays traced by the Rust API's ``Scene::intersect_stream``: ``(t, prim, u, v)``."""
+    """The rays traced by the Rust API's ``Scene::intersect_stream``: ``(t, prim, u, v)``, the
+    ``prim`` ids numbered as ``Scene.intersect`` numbers them."""
 
 def _plane_points(
     vertices: npt.NDArray[np.float64],

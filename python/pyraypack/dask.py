@@ -24,6 +24,7 @@ loaded (and its BVH built, or read from ``bvh_cache``) once, on the client.
 from __future__ import annotations
 
 import os
+import warnings
 from typing import Any, Literal, NamedTuple
 
 import numpy as np
@@ -139,10 +140,17 @@ _Integrator = Literal["global", "direct", "direct-only", "indirect-only", "bounc
 
 
 def _load(scene: Any, quality: _Quality, watertight: bool, bvh_cache: Any) -> _raypack.Scene:
+    """The scene, loaded if it is a path; its warnings point at the line that called the
+    public function that called this one."""
     if isinstance(scene, _raypack.Scene):
         return scene
     if isinstance(scene, (str, os.PathLike)):
-        return _raypack.load(scene, quality=quality, watertight=watertight, bvh_cache=bvh_cache)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            loaded = _raypack.load(scene, quality=quality, watertight=watertight, bvh_cache=bvh_cache)
+        for w in caught:
+            warnings.warn(w.message, w.category, stacklevel=3)
+        return loaded
     raise TypeError(f"scene: expected a pyraypack.Scene or a path to a scene file, got {type(scene).__name__}")
 
 

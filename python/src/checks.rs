@@ -16,7 +16,8 @@ pub fn isa_env(py: Python<'_>) -> PyResult<()> {
         Err(e) => Err(PyValueError::new_err(e)),
         Ok(Some(w)) if !WARNED.swap(true, Ordering::Relaxed) => {
             let message = std::ffi::CString::new(w).unwrap_or_default();
-            PyErr::warn(py, &py.get_type::<PyUserWarning>(), &message, 2)
+            // Stack level 1: the caller's line (a native function has no frame of its own).
+            PyErr::warn(py, &py.get_type::<PyUserWarning>(), &message, 1)
         }
         Ok(_) => Ok(()),
     }

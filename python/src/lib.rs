@@ -123,9 +123,11 @@ fn load_error(e: LoadError) -> PyErr {
     }
 }
 
+/// Issues a `SceneWarning` at the caller's line: a native function has no frame of its own,
+/// so stack level 1 is the Python line that called it.
 fn warn(py: Python<'_>, message: &str) -> PyResult<()> {
     let category = py.get_type::<SceneWarning>();
-    PyErr::warn(py, &category, &std::ffi::CString::new(message).unwrap_or_default(), 2)
+    PyErr::warn(py, &category, &std::ffi::CString::new(message).unwrap_or_default(), 1)
 }
 
 /// How a scene is built: `quality=`, `watertight=`, `bvh_cache=`, `threads=`.
@@ -160,16 +162,16 @@ impl BuildArgs {
 /// builds one from a ``(N, 3)`` array of vertex positions (any real dtype, rounded to float32)
 /// and an ``(M, 3)`` integer array of vertex indices; ``pyraypack.load(path)`` reads a scene file.
 /// Faces with NaN/Inf or huge coordinates, zero area or collinear corners cannot be traced:
-/// they are dropped, counted in ``report`` and announced by a ``SceneWarning``; ``prim`` ids
-/// still index the ``faces`` given.
+/// they are dropped, counted in ``report`` and announced by a ``SceneWarning``; they are never
+/// hit, and ``prim`` ids and ``Scene.faces`` stay those of the faces given (or the file holds).
 #[pyclass(name = "Scene", module = "pyraypack", frozen)]
 struct PyScene {
     scene: Scene,
     /// The options the BVH was built with (a pickle carries them: the snapshot's key covers
     /// them).
     opts: BuildOptions,
-    /// The caller's face index of each committed triangle, when the commit dropped some.
-    prim_map: Option<Vec<u32>>,
+    /// The faces the commit dropped and where the kept ones were, when it dropped some.
+    dropped: Option<Dropped>,
     report: CommitReport,
     /// The BVH cache file and whether the BVH came from it.
     cache: Option<(PathBuf, bool)>,
@@ -178,12 +180,17 @@ struct PyScene {
 
 impl PyScene {
     fn target(&self) -> Target<'_> {
-        Target { scene: &self.scene, prim_map: self.prim_map.as_deref() }
+        match &self.dropped {
+            None => Target { scene: &self.scene, kept: None, given_triangles: self.scene.num_triangles() },
+            Some(d) => Target { scene: &self.scene, kept: Some(&d.kept), given_triangles: d.given_len() },
+        }
     }
 
     /// Commits `builder` as `build` says, warning about what was dropped or not cached.
     fn commit(py: Python<'_>, builder: SceneBuilder, build: &BuildArgs, what: &str) -> PyResult<Self> {
         let pools = PoolCache::default();
+        // The faces as given, to number hits by them when the commit drops some.
+        let given = builder.triangle_indices().to_vec();
         let (opts, cache_dir) = (&build.opts, build.cache.as_deref());
         let (scene, report, cache) = run_detached(py, &pools, build.threads, || match cache_dir {
             None => {
@@ -202,24 +209,60 @@ impl PyScene {
             }
             cache_info = Some((c.path.clone(), c.loaded));
         }
-        Ok(PyScene { scene, opts: opts.clone(), prim_map: None, report, cache: cache_info, pools })
+        let dropped = (report.triangles < given.len()).then(|| Dropped::new(&given, &scene.triangles.indices));
+        drop(given);
+        Ok(PyScene { scene, opts: opts.clone(), dropped, report, cache: cache_info, pools })
+    }
+
+    /// The faces as given: the committed triangles with the dropped ones back in their places.
+    fn given_faces(&self) -> std::borrow::Cow<'_, [[u32; 3]]> {
+        let committed = &self.scene.triangles.indices;
+        let Some(d) = &self.dropped else { return committed.as_slice().into() };
+        let mut faces = Vec::with_capacity(d.given_len());
+        let (mut kept, mut dropped) = (d.kept.iter().zip(committed).peekable(), d.faces.iter());
+        for j in 0..d.given_len() {
+            match kept.next_if(|(k, _)| **k as usize == j) {
+                Some((_, f)) => faces.push(*f),
+                None => faces.extend(dropped.next()),
+            }
+        }
+        faces.into()
     }
 }
 
-/// The caller's index of each kept face: the commit keeps faces in order and drops a face
-/// for its corners' positions only, so equal index triples share a fate and the kept faces
-/// match the given ones greedily.
-fn kept_face_map(given: &[[u32; 3]], kept: &[[u32; 3]]) -> Vec<u32> {
-    let mut map = Vec::with_capacity(kept.len());
-    let mut j = 0;
-    for k in kept {
-        while given[j] != *k {
+/// What a commit dropped of the faces it was given, so that `prim` ids and `Scene.faces`
+/// stay the given faces' (the library numbers the kept triangles `0..kept`).
+struct Dropped {
+    /// The given index of each committed triangle (increasing).
+    kept: Vec<u32>,
+    /// The dropped faces, in the order given.
+    faces: Vec<[u32; 3]>,
+}
+
+impl Dropped {
+    /// From the faces given and those the commit kept: the commit keeps faces in order and
+    /// drops a face for its corners' positions only, so equal index triples share a fate and
+    /// the kept faces match the given ones greedily.
+    fn new(given: &[[u32; 3]], kept_faces: &[[u32; 3]]) -> Self {
+        let mut kept = Vec::with_capacity(kept_faces.len());
+        let mut faces = Vec::with_capacity(given.len() - kept_faces.len());
+        let mut j = 0;
+        for k in kept_faces {
+            while given[j] != *k {
+                faces.push(given[j]);
+                j += 1;
+            }
+            kept.push(j as u32);
             j += 1;
         }
-        map.push(j as u32);
-        j += 1;
+        faces.extend_from_slice(&given[j..]);
+        Dropped { kept, faces }
     }
-    map
+
+    /// How many faces were given.
+    fn given_len(&self) -> usize {
+        self.kept.len() + self.faces.len()
+    }
 }
 
 #[pymethods]
@@ -249,10 +292,9 @@ impl PyScene {
             b.add_light(light);
         }
         drop((positions, normals));
-        let mut scene = Self::commit(py, b, &build, "pyraypack.Scene")?;
+        let scene = Self::commit(py, b, &build, "pyraypack.Scene")?;
         let r = &scene.report;
         if r.dropped() > 0 {
-            scene.prim_map = Some(kept_face_map(&indices, &scene.scene.triangles.indices));
             warn(
                 py,
                 &format!(
@@ -438,7 +480,7 @@ impl PyScene {
         self.cache.as_ref().is_some_and(|(_, loaded)| *loaded)
     }
 
-    /// The committed triangles' vertex positions ``(N, 3)`` float32 (a copy).
+    /// The vertex positions ``(N, 3)`` float32 (a copy).
     #[getter]
     fn vertices<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f32>> {
         let p = &self.scene.triangles.positions;
@@ -446,11 +488,12 @@ impl PyScene {
         PyArray1::from_vec(py, flat).reshape((p.len(), 3)).expect("3 floats per vertex")
     }
 
-    /// The committed triangles ``(M, 3)`` int64 (a copy): a loaded scene's ``prim`` ids index
-    /// these rows; a scene built from arrays reports the caller's face indices instead.
+    /// The faces ``(M, 3)`` int64 (a copy) as given to ``Scene`` or as the file holds them
+    /// (polygons as triangles), the dropped ones included: ``prim`` ids index these rows
+    /// (a sphere's ``prim`` is ``M`` plus its index among the scene's spheres).
     #[getter]
     fn faces<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> {
-        let f = &self.scene.triangles.indices;
+        let f = self.given_faces();
         let flat: Vec<i64> = f.iter().flat_map(|t| t.map(|i| i as i64)).collect();
         PyArray1::from_vec(py, flat).reshape((f.len(), 3)).expect("3 indices per face")
     }
@@ -466,9 +509,13 @@ impl PyScene {
         let s = &self.scene;
         let mut h = xxhash_rust::xxh3::Xxh3::new();
         h.update(&raypack::render::part::scene_digest(s).to_le_bytes());
-        h.update(format!("{:?} {:?} {:?}", s.camera, self.opts, self.prim_map.as_ref().map(|m| m.len())).as_bytes());
-        if let Some(m) = &self.prim_map {
-            h.update(&u32_bytes(m));
+        let dropped = self.dropped.as_ref();
+        h.update(
+            format!("{:?} {:?} {:?}", s.camera, self.opts, dropped.map(|d| (d.kept.len(), d.faces.len()))).as_bytes(),
+        );
+        if let Some(d) = dropped {
+            h.update(&u32_bytes(&d.kept));
+            h.update(&u32_bytes(d.faces.as_flattened()));
         }
         format!("pyraypack.Scene-{:032x}", h.digest128())
     }
@@ -481,11 +528,12 @@ impl PyScene {
         let scene = &self.scene;
         let opts = &self.opts;
         let bytes = run_detached(py, &self.pools, None, || scene.to_snapshot(opts))?;
-        let prim_map = self.prim_map.as_ref().map(|m| PyBytes::new(py, &u32_bytes(m)));
+        let kept = self.dropped.as_ref().map(|d| PyBytes::new(py, &u32_bytes(&d.kept)));
+        let dropped = self.dropped.as_ref().map(|d| PyBytes::new(py, &u32_bytes(d.faces.as_flattened())));
         let r = &self.report;
         let report = (r.triangles, r.spheres, r.dropped_non_finite, r.dropped_degenerate, r.dropped_spheres);
         let rebuild = py.import("pyraypack._raypack")?.getattr("_scene_from_snapshot")?;
-        let args = (PyBytes::new(py, &bytes), prim_map, report).into_pyobject(py)?;
+        let args = (PyBytes::new(py, &bytes), kept, report, dropped).into_pyobject(py)?;
         Ok((rebuild, args))
     }
 }
@@ -495,29 +543,52 @@ fn u32_bytes(v: &[u32]) -> Vec<u8> {
     v.iter().flat_map(|x| x.to_le_bytes()).collect()
 }
 
+/// Little-endian bytes as `u32`s, if they are whole.
+fn u32s_of(b: &[u8]) -> Option<Vec<u32>> {
+    b.len().is_multiple_of(4).then(|| b.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
+}
+
 /// Unpickles a `Scene` (see `Scene.__reduce__`): the snapshot is checked before use, and a
 /// damaged or forged one raises `ValueError`. Not part of the public API.
 #[pyfunction]
+#[pyo3(signature = (snapshot, kept, report, dropped = None))]
 fn _scene_from_snapshot(
     py: Python<'_>,
     snapshot: &[u8],
-    prim_map: Option<&[u8]>,
+    kept: Option<&[u8]>,
     report: (usize, usize, usize, usize, usize),
+    dropped: Option<&[u8]>,
 ) -> PyResult<PyScene> {
     let pools = PoolCache::default();
     let (scene, opts) = run_detached(py, &pools, None, || Scene::from_snapshot(snapshot))?
         .map_err(|e| PyValueError::new_err(format!("pyraypack.Scene: cannot unpickle: {e}")))?;
-    let prim_map = match prim_map {
-        None => None,
-        Some(b) => {
-            let map: Vec<u32> = b.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
-            // The caller's face indices of the kept faces: increasing, one per triangle.
-            if b.len() % 4 != 0 || map.len() != scene.num_triangles() || map.windows(2).any(|w| w[0] >= w[1]) {
-                return Err(PyValueError::new_err(
-                    "pyraypack.Scene: cannot unpickle: the face map does not fit the scene's triangles",
-                ));
+    let dropped = match (kept, dropped) {
+        (None, None) => None,
+        (Some(k), d) => {
+            let kept = u32s_of(k);
+            let faces = u32s_of(d.unwrap_or_default())
+                .filter(|f| f.len().is_multiple_of(3))
+                .map(|f| f.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect::<Vec<_>>());
+            // The given indices of the kept faces: increasing, one per triangle, all below the
+            // number of faces given; the dropped faces' corners among the scene's vertices.
+            let vertices = scene.triangles.positions.len();
+            let fits = |kept: &[u32], faces: &[[u32; 3]]| {
+                kept.len() == scene.num_triangles()
+                    && kept.windows(2).all(|w| w[0] < w[1])
+                    && kept.last().is_none_or(|&k| (k as usize) < kept.len() + faces.len())
+                    && faces.iter().flatten().all(|&i| (i as usize) < vertices)
+            };
+            match (kept, faces) {
+                (Some(kept), Some(faces)) if fits(&kept, &faces) => Some(Dropped { kept, faces }),
+                _ => {
+                    return Err(PyValueError::new_err(
+                        "pyraypack.Scene: cannot unpickle: the face map does not fit the scene's triangles",
+                    ));
+                }
             }
-            Some(map)
+        }
+        (None, Some(_)) => {
+            return Err(PyValueError::new_err("pyraypack.Scene: cannot unpickle: dropped faces without a face map"));
         }
     };
     let (triangles, spheres, dropped_non_finite, dropped_degenerate, dropped_spheres) = report;
@@ -525,7 +596,7 @@ fn _scene_from_snapshot(
         return Err(PyValueError::new_err("pyraypack.Scene: cannot unpickle: the report does not fit the scene"));
     }
     let report = CommitReport { triangles, spheres, dropped_non_finite, dropped_degenerate, dropped_spheres };
-    Ok(PyScene { scene, opts, prim_map, report, cache: None, pools })
+    Ok(PyScene { scene, opts, dropped, report, cache: None, pools })
 }
 
 /// The closest hits of a ray query, one entry per ray: ``t`` (float32, ``inf`` on a miss),
@@ -570,7 +641,9 @@ impl Hits {
     }
 }
 
-/// Loads a scene file (``.dae``, ``.obj``, ``.ply``) and commits it.
+/// Loads a scene file (``.dae``, ``.obj``, ``.ply``) and commits it. A file without lights
+/// gets the CLI's default light rig for ``render`` without a warning (ray casting does not
+/// use lights; ``render(path)`` says so).
 #[pyfunction]
 #[pyo3(signature = (path, *, quality = "medium", watertight = false, bvh_cache = None, threads = None))]
 fn load(
@@ -582,17 +655,24 @@ fn load(
     threads: Option<usize>,
 ) -> PyResult<PyScene> {
     let build = BuildArgs::new(py, quality, watertight, bvh_cache, threads)?;
-    load_path(py, &path, &build)
+    load_path(py, &path, &build, false)
 }
 
-fn load_path(py: Python<'_>, path: &Path, build: &BuildArgs) -> PyResult<PyScene> {
-    let (builder, warnings) = {
+/// Loads and commits a scene file; `for_render`: also warn when the file has no lights (the
+/// default light rig is added either way).
+fn load_path(py: Python<'_>, path: &Path, build: &BuildArgs, for_render: bool) -> PyResult<PyScene> {
+    let (builder, mut warnings, synthesized) = {
         let p = path.to_path_buf();
         run_detached(py, &PoolCache::default(), build.threads, move || {
-            raypack::io::load_scene(&p).map(|l| (l.builder, l.warnings))
+            raypack::io::load_scene(&p).map(|l| (l.builder, l.warnings, l.synthesized))
         })?
         .map_err(load_error)?
     };
+    let lights_added = synthesized.iter().any(|s| matches!(s, raypack::io::Synthesized::DefaultLights { .. }));
+    if lights_added && !for_render {
+        // The loader's last warning is the one that announces the rig.
+        warnings.pop();
+    }
     for w in warnings {
         warn(py, &w)?;
     }
@@ -688,7 +768,7 @@ fn render<'py>(
         bound = s.clone();
         bound.get()
     } else if let Ok(path) = scene.extract::<PathBuf>() {
-        loaded = load_path(py, &path, &build)?;
+        loaded = load_path(py, &path, &build, true)?;
         &loaded
     } else {
         return Err(PyTypeError::new_err(format!(
@@ -759,8 +839,8 @@ fn _ray_sets<'py>(
 }
 
 /// The rays of `Scene.intersect`'s arguments collected into one `Vec<Ray>` and traced by the
-/// library's `Scene::intersect_stream`, as a Rust caller would: `(t, prim, u, v)` with the
-/// committed scene's primitive ids. For the tests that compare the module with the Rust API
+/// library's `Scene::intersect_stream`, as a Rust caller would: `(t, prim, u, v)`, the
+/// committed scene's primitive ids numbered as `Scene.intersect` numbers them. For the tests that compare the module with the Rust API
 /// (not part of the public API).
 #[pyfunction]
 #[pyo3(signature = (scene, origins, directions, tnear = 0.0, tfar = f64::INFINITY))]
@@ -783,8 +863,9 @@ fn _intersect_stream<'py>(
     let rays = a.rays()?;
     let rays: Vec<raypack::Ray> = (0..rays.len).map(|i| rays.get(i)).collect();
     let mut hits = vec![raypack::Hit::MISS; rays.len()];
-    scene.get().scene.intersect_stream(&rays, &mut hits);
-    let prim = hits.iter().map(|h| if h.is_hit() { h.prim as i64 } else { -1 }).collect();
+    let target = scene.get().target();
+    target.scene.intersect_stream(&rays, &mut hits);
+    let prim = hits.iter().map(|h| if h.is_hit() { target.caller_prim(h.prim) } else { -1 }).collect();
     Ok((
         PyArray1::from_iter(py, hits.iter().map(|h| h.t)),
         PyArray1::from_vec(py, prim),

@@ -82,19 +82,27 @@ impl HitArrays<'_> {
     }
 }
 
-/// A scene and how its primitive ids map to the ids the caller knows.
+/// A scene and how its primitive ids map to the ids the caller knows: the index of the face
+/// among those given (or held by the file), spheres after them.
 #[derive(Clone, Copy)]
 pub struct Target<'a> {
     pub scene: &'a Scene,
-    /// The caller's face index of each committed triangle, when the commit dropped some.
-    pub prim_map: Option<&'a [u32]>,
+    /// The given face index of each committed triangle, when the commit dropped some.
+    pub kept: Option<&'a [u32]>,
+    /// How many faces were given (the committed triangles plus the dropped ones).
+    pub given_triangles: usize,
 }
 
 impl Target<'_> {
     #[inline(always)]
-    fn caller_prim(&self, prim: u32) -> i64 {
-        // Only scenes built from arrays have a map, and they hold triangles only.
-        self.prim_map.and_then(|map| map.get(prim as usize)).map_or(prim as i64, |&p| p as i64)
+    pub fn caller_prim(&self, prim: u32) -> i64 {
+        let p = prim as usize;
+        let committed = self.scene.num_triangles();
+        if p >= committed {
+            (p - committed + self.given_triangles) as i64
+        } else {
+            self.kept.and_then(|map| map.get(p)).map_or(prim as i64, |&g| g as i64)
+        }
     }
 
     /// The unit geometric normal at `hit` (triangles: `(v1 - v0) x (v2 - v0)`; spheres: outward).

@@ -210,6 +210,13 @@ impl SceneBuilder {
         self.triangles.len()
     }
 
+    /// The vertex indices of the triangles added so far, in the order added (before
+    /// [`SceneBuilder::commit`] drops the untraceable ones): what a front end needs to
+    /// number hits by the faces its caller or file gave.
+    pub fn triangle_indices(&self) -> &[[u32; 3]] {
+        &self.triangles.indices
+    }
+
     /// Spheres added so far.
     pub fn num_spheres(&self) -> usize {
         self.spheres.len()
@@ -560,6 +567,8 @@ mod tests {
         let m = b.add_material(Material::default());
         let p = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(f32::NAN, 0.0, 0.0), Vec3::new(2.0, 0.0, 0.0)];
         b.add_mesh(&p, &[[0, 1, 2], [0, 1, 3], [0, 1, 4], [2, 2, 1]], m).unwrap();
+        // Before the commit the builder holds every face as given.
+        assert_eq!(b.triangle_indices(), &[[0, 1, 2], [0, 1, 3], [0, 1, 4], [2, 2, 1]]);
         b.add_sphere(Vec3::ZERO, -1.0, m).unwrap();
         b.add_sphere(Vec3::ZERO, 1.0, m).unwrap();
         let (scene, report) = b.commit(&BuildOptions::default());
