@@ -6,7 +6,8 @@
     >>> hits.t, hits.prim
     (array([1.], dtype=float32), array([0]))
 
-``Scene`` builds a scene from vertex and face arrays, ``load`` reads a scene file,
+``pyraypack.isa()`` names the kernels' instruction set (also in ``repr(scene)``) and
+``pyraypack.__version__`` the package's version. ``Scene`` builds a scene from vertex and face arrays, ``load`` reads a scene file,
 ``Scene.intersect`` / ``Scene.occluded`` trace numpy rays over all cores with the GIL
 released, ``render`` runs the path tracer (on the whole image or a window of it),
 ``pyraypack.trimesh.RayMeshIntersector`` is a drop-in for trimesh's ray queries, and
@@ -14,6 +15,6 @@ released, ``render`` runs the path tracer (on the whole image or a window of it)
 pyraypack[dask]``). Scenes pickle with their BVH, which is never rebuilt.
 """
 
-from ._raypack import Hits, Scene, SceneWarning, load, render, tile_bounds
+from ._raypack import Hits, Scene, SceneWarning, __version__, isa, load, render, tile_bounds
 
-__all__ = ["Hits", "Scene", "SceneWarning", "load", "render", "tile_bounds"]
+__all__ = ["Hits", "Scene", "SceneWarning", "__version__", "isa", "load", "render", "tile_bounds"]

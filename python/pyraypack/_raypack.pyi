@@ -15,7 +15,11 @@ _Quality = Literal["fast", "medium", "high"]
 _Integrator = Literal["global", "direct", "direct-only", "indirect-only", "bounce", "normals"]
 _Path = Union[str, PathLike[str]]
 
+__version__: str
+
 __all__ = [
+    "__version__",
+    "isa",
     "Scene",
     "Hits",
     "load",
@@ -217,6 +221,12 @@ def render(
     ``pixel_bounds=(x0, x1, y0, y1)`` (pixels, ends exclusive) render only that window and
     return its pixels ``(y1 - y0, x1 - x0, 3)``, each bit for bit its value in the whole
     image."""
+
+def isa() -> str:
+    """The instruction set the kernels run on in this process: ``"avx512"``, ``"avx2"`` or
+    ``"sse2"`` (``"portable"`` off x86-64), the CPU's best unless ``RAYPACK_ISA`` names a
+    lower tier (read once, when the first scene is made). Every ``Scene``'s ``repr`` shows it
+    too."""
 
 def tile_bounds(count: int, width: int, height: int) -> list[tuple[int, int, int, int]]:
     """The pixel bounds ``(x0, x1, y0, y1)`` of the ``count`` parts of a ``width x height``

@@ -499,7 +499,12 @@ impl PyScene {
     }
 
     fn __repr__(&self) -> String {
-        format!("<pyraypack.Scene: {} triangles, {} spheres>", self.scene.num_triangles(), self.scene.num_spheres())
+        format!(
+            "<pyraypack.Scene: {} triangles, {} spheres, isa={}>",
+            self.scene.num_triangles(),
+            self.scene.num_spheres(),
+            self.scene.isa()
+        )
     }
 
     /// A token of the scene's contents for Dask (``dask.base.tokenize``): equal for scenes
@@ -794,6 +799,15 @@ fn tile_bounds(count: usize, width: usize, height: usize) -> PyResult<Vec<(usize
     Ok(parts.into_iter().map(|b| (b.x0, b.x1, b.y0, b.y1)).collect())
 }
 
+/// The instruction set the kernels run on in this process: ``"avx512"``, ``"avx2"`` or
+/// ``"sse2"`` (``"portable"`` off x86-64), the CPU's best unless ``RAYPACK_ISA`` names a lower
+/// tier (read once, when the first scene is made). Every ``Scene``'s ``repr`` shows it too.
+#[pyfunction]
+fn isa(py: Python<'_>) -> PyResult<&'static str> {
+    checks::isa_env(py)?;
+    Ok(raypack::Isa::default_for_process().name())
+}
+
 /// How many BVHs this process has built (loading one from a cache file or a pickle does not
 /// count). Not part of the public API: for the tests and benchmarks that check that a scene
 /// was not rebuilt.
@@ -925,6 +939,8 @@ fn _raypack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(load, m)?)?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(tile_bounds, m)?)?;
+    m.add_function(wrap_pyfunction!(isa, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_function(wrap_pyfunction!(_bvh_builds, m)?)?;
     m.add_function(wrap_pyfunction!(_scene_from_snapshot, m)?)?;
     m.add_function(wrap_pyfunction!(_ray_sets, m)?)?;
