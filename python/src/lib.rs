@@ -209,7 +209,16 @@ impl PyScene {
             }
             cache_info = Some((c.path.clone(), c.loaded));
         }
-        let dropped = (report.triangles < given.len()).then(|| Dropped::new(&given, &scene.triangles.indices));
+        let dropped = if report.triangles < given.len() {
+            let d = Dropped::new(&given, &scene.triangles.indices).ok_or_else(|| {
+                PyRuntimeError::new_err(format!(
+                    "{what}: internal error (please report it): the committed faces are not the given ones in order"
+                ))
+            })?;
+            Some(d)
+        } else {
+            None
+        };
         drop(given);
         Ok(PyScene { scene, opts: opts.clone(), dropped, report, cache: cache_info, pools })
     }
@@ -242,21 +251,23 @@ struct Dropped {
 impl Dropped {
     /// From the faces given and those the commit kept: the commit keeps faces in order and
     /// drops a face for its corners' positions only, so equal index triples share a fate and
-    /// the kept faces match the given ones greedily.
-    fn new(given: &[[u32; 3]], kept_faces: &[[u32; 3]]) -> Self {
+    /// the kept faces match the given ones greedily. `None` if they are not a subsequence.
+    fn new(given: &[[u32; 3]], kept_faces: &[[u32; 3]]) -> Option<Self> {
         let mut kept = Vec::with_capacity(kept_faces.len());
-        let mut faces = Vec::with_capacity(given.len() - kept_faces.len());
-        let mut j = 0;
+        let mut faces = Vec::with_capacity(given.len().saturating_sub(kept_faces.len()));
+        let mut rest = given.iter().enumerate();
         for k in kept_faces {
-            while given[j] != *k {
-                faces.push(given[j]);
-                j += 1;
+            loop {
+                let (j, g) = rest.next()?;
+                if g == k {
+                    kept.push(j as u32);
+                    break;
+                }
+                faces.push(*g);
             }
-            kept.push(j as u32);
-            j += 1;
         }
-        faces.extend_from_slice(&given[j..]);
-        Dropped { kept, faces }
+        faces.extend(rest.map(|(_, g)| *g));
+        Some(Dropped { kept, faces })
     }
 
     /// How many faces were given.
