@@ -171,7 +171,7 @@ def main():
         for isa in a.isa:
             for s in scenes:
                 f = out / f"{isa}-{label(s)}-{r}.json"
-                cmd = [a.bin, "bench", str(s), "--against", "embree", "--isa", isa, "-t", a.threads,
+                cmd = [a.bin, "bench", str(s), "--against", "embree", "--isa", isa, "--threads-list", a.threads,
                        "--runs", str(a.runs), "--build-runs", str(a.build_runs), "--json", str(f)]
                 if a.methods:
                     cmd += ["--methods", a.methods]
