@@ -1,3 +1,4 @@
+// Not split: the module's entry points (#[pyfunction]s and the Scene class) are registered together here; argument parsing, checks and tracing already live in args.rs, checks.rs and trace.rs.
 //! `pyraypack._raypack`: the Python module. numpy in, numpy out, in the vocabulary of the Rust
 //! API ([`raypack::Scene`], [`raypack::Hit`]) and of Embree.
 //!

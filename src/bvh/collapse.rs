@@ -1,3 +1,4 @@
+// Not split: the collapse's dynamic program and the leaf packing it decides read best side by side, with their tests.
 //! BVH2 → BVH8 collapse chosen by the surface area heuristic, and leaf packing into SoA
 //! blocks.
 //!

@@ -1,3 +1,4 @@
+// Not split: one IsaOp per query, each a few lines, listed together so the public entry points of the kernels are in one place.
 //! The entry points of the BVH8 kernels: each query is an `IsaOp` that `dispatch`
 //! instantiates per ISA tier, and that picks the triangle kernel `P` of the BVH's layout
 //! ([`TriangleTest`]) once per call.

@@ -1,3 +1,4 @@
+// Not split: the closest-hit and any-hit single-ray kernels share the node test and stack, with their unit tests.
 //! Single-ray traversal of the 8-wide BVH: one ray against the eight child boxes of a node
 //! per step, closest hit (`intersect1`) and any hit (`occluded1`).
 //!

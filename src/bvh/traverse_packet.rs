@@ -1,3 +1,4 @@
+// Not split: the closest-hit and any-hit packet kernels share their node step, leaf culling and fallback.
 //! Packet traversal of the 8-wide BVH: K = 8 or 16 rays at once, with active masks.
 //!
 //! (One file past 600 lines: the closest-hit and any-hit packet kernels share their node

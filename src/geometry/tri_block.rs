@@ -1,3 +1,4 @@
+// Not split: the block layout and the two triangle tests on it, with their scalar twins and unit tests.
 //! SoA leaf blocks of M triangles and the SIMD Möller–Trumbore test (Möller & Trumbore,
 //! "Fast, Minimum Storage Ray/Triangle Intersection", JGT 1997) on them.
 //!

@@ -1,3 +1,4 @@
+// Not split: one format's header parser and its three body readers, with their unit tests.
 //! PLY, the Stanford polygon file format (Greg Turk, 1994), as the Stanford 3D Scanning
 //! Repository ships it: ASCII, `binary_little_endian` and `binary_big_endian` bodies.
 //!

@@ -1,3 +1,4 @@
+// Not split yet: the bench's parsing, timing and printing are one command; moving its logic into the library is issue 67's point 3.
 //! `raypack bench`: times raypack's kernels (and, with `--against embree`, Embree's calls) on
 //! the standard ray sets of [`raypack::raysets`], over one thread and all threads.
 //!

@@ -1,3 +1,4 @@
+// Not split further: the HTML page and its charts are one output written all or none; the JSON input is already report/input.rs.
 //! `raypack report A.json B.json … --out DIR` (and `raypack bench … --report DIR`): a
 //! self-contained benchmark report, `index.html` with the charts as inline SVG (no network,
 //! no JavaScript) and the same charts as PNG files beside it.
