@@ -143,7 +143,7 @@ fn report_fields_are_typed_on_read_and_escaped_when_written() {
     let out = dir.path().join("rep");
     // The fields that were written into the HTML unchecked: a string where a number belongs.
     type Edit = fn(&mut serde_json::Value);
-    let cases: [(&str, Edit); 8] = [
+    let cases: [(&str, Edit); 9] = [
         ("triangles", |j| j["triangles"] = "<script>t</script>".into()),
         ("machine.logical_cpus", |j| j["machine"]["logical_cpus"] = "<script>c</script>".into()),
         ("machine.memory_bytes", |j| j["machine"]["memory_bytes"] = "<img src=x onerror=alert(1)>".into()),
@@ -152,6 +152,7 @@ fn report_fields_are_typed_on_read_and_escaped_when_written() {
         ("load_average.after[1]", |j| j["load_average"]["after"][1] = "<script>l</script>".into()),
         ("results[2].mrays_per_s", |j| j["results"][2]["mrays_per_s"] = "fast".into()),
         ("raypack.commit", |j| j["raypack"]["commit"] = serde_json::json!({"x": 1})),
+        ("busy_reason", |j| j["busy_reason"] = serde_json::json!([1])),
     ];
     for (field, set) in cases {
         let mut j = bench_json(3);
@@ -172,14 +173,21 @@ fn report_fields_are_typed_on_read_and_escaped_when_written() {
     j["results"][0]["method"] = "<script>method</script>".into();
     j["results"][1]["rays"] = "<script>rays</script>".into();
     j["summary"][0]["raypack_method"] = "<script>best</script>".into();
+    j["busy"] = true.into();
+    j["busy_reason"] = "<script>busy</script>".into();
     let p = write_json(dir.path(), "evil.json", &j);
     let r = run(&["report", s(&p), "--out", s(&out)]);
     assert_eq!(r.code, Some(0), "{r:?}");
     let html = std::fs::read_to_string(out.join("index.html")).unwrap();
     assert!(!html.contains("<script") && !html.contains("<b>isa"), "unescaped markup in the report");
-    for shown in
-        ["&lt;script&gt;cpu", "&lt;script&gt;note", "&lt;script&gt;scene", "&lt;script&gt;best", "&lt;b&gt;isa"]
-    {
+    for shown in [
+        "&lt;script&gt;cpu",
+        "&lt;script&gt;note",
+        "&lt;script&gt;scene",
+        "&lt;script&gt;best",
+        "&lt;b&gt;isa",
+        "&lt;script&gt;busy",
+    ] {
         assert!(html.contains(shown), "{shown} is not shown");
     }
     // Every SVG still parses, with the method name as text.

@@ -36,6 +36,7 @@ fn report_svgs_parse_and_show_every_result() {
         "raypack_mrays_per_s": 20.0, "embree_method": "rtcIntersect8 (medium)", "embree_mrays_per_s": 18.0,
         "ratio": 1.111, "ratio_min": 0.987, "ratio_max": 1.234}]);
     new["busy"] = true.into();
+    new["busy_reason"] = "other processes used 40% of the CPU time during the run".into();
     new["load_average"] = serde_json::json!({"before": [1.9, 1.0, 0.5], "after": [2.1, 1.1, 0.6]});
     let (a, b) = (dir.path().join("old.json"), dir.path().join("new.json"));
     std::fs::write(&a, old.to_string()).unwrap();
@@ -50,7 +51,7 @@ fn report_svgs_parse_and_show_every_result() {
     assert!(html.contains("Test CPU 9000") && html.contains("abc1234") && html.contains("unknown"));
     // The summary of the schema-2 JSON is a table, with its spread and the busy warning.
     assert!(html.contains("<td>1.11</td><td>0.99–1.23</td>"), "{html}");
-    assert!(html.contains("was busy"));
+    assert!(html.contains("was busy during this run</b> (other processes used 40%"), "{html}");
     let mut texts = Vec::new();
     let mut svgs = 0;
     for (start, _) in html.match_indices("<svg") {

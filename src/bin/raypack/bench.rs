@@ -201,26 +201,30 @@ pub struct EmbreeIdentity {
 /// the ratios of methods timed at different moments unreliable.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Load {
-    /// 1-, 5- and 15-minute load averages before the run.
+    /// 1-, 5- and 15-minute load averages before the run (shown, not judged: they lag by
+    /// minutes and count this run's predecessors in a sequence of runs).
     pub before: Option<[f64; 3]>,
     /// The same after the run (which includes the run itself).
     pub after: Option<[f64; 3]>,
     /// The share of all CPUs other processes kept busy in the moment before the run.
     pub busy_before: Option<f64>,
+    /// The share of all CPU time during the run that other processes used.
+    pub others_during: Option<f64>,
     /// The share of the CPU time during the run that the hypervisor stole.
     pub steal: Option<f64>,
 }
 
 impl Load {
-    /// Why the figures may be unreliable, if they may: other processes busy before the run,
-    /// a 1-minute load average above half the logical CPUs, or more than 2% steal time.
-    pub fn busy_reason(&self, logical_cpus: usize) -> Option<String> {
+    /// Why the figures may be unreliable, if they may: other processes kept more than a
+    /// quarter of the CPUs busy just before or during the run, or the hypervisor stole more
+    /// than 2% of the CPU time. Only other processes count, never the run's own threads.
+    pub fn busy_reason(&self) -> Option<String> {
         let mut why = Vec::new();
         if let Some(b) = self.busy_before.filter(|&b| b > 0.25) {
             why.push(format!("other processes kept {:.0}% of the CPUs busy just before the run", 100.0 * b));
         }
-        if let Some([l1, ..]) = self.before.filter(|l| l[0] > 0.5 * logical_cpus as f64) {
-            why.push(format!("the 1-minute load average was {l1:.2} on {logical_cpus} logical CPUs"));
+        if let Some(b) = self.others_during.filter(|&b| b > 0.25) {
+            why.push(format!("other processes used {:.0}% of the CPU time during the run", 100.0 * b));
         }
         if let Some(st) = self.steal.filter(|&st| st > 0.02) {
             why.push(format!("the hypervisor stole {:.1}% of the CPU time during the run", 100.0 * st));
@@ -531,7 +535,10 @@ pub fn run_bench(
         }
     }
     report.load.after = machine::load_average();
-    report.load.steal = cpu_before.zip(CpuTimes::now()).map(|(a, b)| b.since(&a).1);
+    if let Some((a, b)) = cpu_before.zip(CpuTimes::now()) {
+        report.load.steal = Some(b.since(&a).1);
+        report.load.others_during = Some(b.others_since(&a));
+    }
     Ok(report)
 }
 
@@ -633,7 +640,7 @@ impl BenchReport {
 
     /// The warning to print under the header when the machine was busy.
     pub fn busy_warning(&self) -> Option<String> {
-        self.load.busy_reason(self.machine.logical_cpus).map(|why| {
+        self.load.busy_reason().map(|why| {
             format!(
                 "WARNING: the machine was busy ({why}); the figures and ratios may be off, run again on an idle machine"
             )
@@ -850,6 +857,7 @@ impl BenchReport {
             "embree": self.embree.as_ref().map(|e| json!({"version": e.version, "isa": e.isa})),
             "load_average": {"before": self.load.before, "after": self.load.after},
             "busy": self.busy_warning().is_some(),
+            "busy_reason": self.load.busy_reason(),
             "summary": summary,
             "scene": self.scene,
             "triangles": self.triangles,
@@ -1185,13 +1193,24 @@ mod tests {
     }
 
     #[test]
-    fn load_is_busy_above_half_the_cpus_or_with_steal() {
-        let idle = Load { before: Some([0.4, 0.3, 0.2]), busy_before: Some(0.05), steal: Some(0.0), ..Load::default() };
-        assert_eq!(idle.busy_reason(2), None);
-        let loaded = Load { before: Some([1.5, 1.0, 1.0]), ..idle.clone() };
-        assert!(loaded.busy_reason(2).unwrap().contains("load average was 1.50 on 2"));
+    fn busy_counts_other_processes_and_steal_never_the_load_average() {
+        let idle = Load {
+            before: Some([0.4, 0.3, 0.2]),
+            busy_before: Some(0.05),
+            others_during: Some(0.01),
+            steal: Some(0.0),
+            ..Load::default()
+        };
+        assert_eq!(idle.busy_reason(), None);
+        // A sequence of runs leaves its own load average behind: not busy.
+        let after_own_runs = Load { before: Some([1.9, 1.5, 1.0]), ..idle.clone() };
+        assert_eq!(after_own_runs.busy_reason(), None);
+        let before = Load { busy_before: Some(0.6), ..idle.clone() };
+        assert!(before.busy_reason().unwrap().contains("60% of the CPUs busy just before"));
+        let during = Load { others_during: Some(0.4), ..idle.clone() };
+        assert!(during.busy_reason().unwrap().contains("used 40% of the CPU time during"));
         let stolen = Load { steal: Some(0.1), ..idle };
-        assert!(stolen.busy_reason(2).unwrap().contains("stole 10.0%"));
+        assert!(stolen.busy_reason().unwrap().contains("stole 10.0%"));
     }
 
     /// `--watertight --against embree`: raypack's watertight tree against Embree's robust

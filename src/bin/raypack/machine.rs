@@ -88,12 +88,15 @@ pub struct CpuTimes {
     pub idle: u64,
     /// Ticks the hypervisor gave to other guests while this one wanted to run.
     pub steal: u64,
+    /// Ticks this process ran, all its threads (`/proc/self/stat`'s utime and stime).
+    pub own: u64,
 }
 
 impl CpuTimes {
     /// Now, or `None` where `/proc/stat` cannot be read.
     pub fn now() -> Option<Self> {
-        parse_stat(&std::fs::read_to_string("/proc/stat").ok()?)
+        let own = std::fs::read_to_string("/proc/self/stat").ok().and_then(|t| parse_self_stat(&t)).unwrap_or(0);
+        Some(CpuTimes { own, ..parse_stat(&std::fs::read_to_string("/proc/stat").ok()?)? })
     }
 
     /// Fractions of the CPU time from `earlier` to `self` that was busy (not idle) and stolen.
@@ -103,13 +106,30 @@ impl CpuTimes {
         let steal = self.steal.saturating_sub(earlier.steal) as f64;
         ((1.0 - idle / total).clamp(0.0, 1.0), (steal / total).clamp(0.0, 1.0))
     }
+
+    /// The share of all CPU time from `earlier` to `self` that other processes kept busy:
+    /// the busy ticks less this process's own.
+    pub fn others_since(&self, earlier: &CpuTimes) -> f64 {
+        let total = self.total.saturating_sub(earlier.total).max(1) as f64;
+        let busy = (self.total - self.idle).saturating_sub(earlier.total - earlier.idle);
+        let own = self.own.saturating_sub(earlier.own);
+        (busy.saturating_sub(own) as f64 / total).clamp(0.0, 1.0)
+    }
+}
+
+/// utime + stime from `/proc/self/stat` (fields 14 and 15; the command name in field 2 may
+/// hold spaces, so fields are counted after its closing parenthesis).
+fn parse_self_stat(text: &str) -> Option<u64> {
+    let rest = &text[text.rfind(')')? + 1..];
+    let mut f = rest.split_whitespace().skip(11);
+    Some(f.next()?.parse::<u64>().ok()? + f.next()?.parse::<u64>().ok()?)
 }
 
 fn parse_stat(text: &str) -> Option<CpuTimes> {
     let line = text.lines().find(|l| l.starts_with("cpu "))?;
     let f: Vec<u64> = line.split_whitespace().skip(1).take(8).map(|x| x.parse().ok()).collect::<Option<_>>()?;
     let at = |i: usize| f.get(i).copied().unwrap_or(0);
-    Some(CpuTimes { total: f.iter().sum(), idle: at(3) + at(4), steal: at(7) })
+    Some(CpuTimes { total: f.iter().sum(), idle: at(3) + at(4), steal: at(7), own: 0 })
 }
 
 /// The share of all CPUs that other processes kept busy over `window` (this process sleeps
@@ -130,8 +150,13 @@ mod tests {
         assert_eq!(parse_loadavg("garbage"), None);
         let a = parse_stat("cpu  100 0 50 800 50 0 0 0 0 0\ncpu0 1 2 3\n").unwrap();
         let b = parse_stat("cpu  200 0 50 850 50 0 0 50 0 0\n").unwrap();
-        assert_eq!(a, CpuTimes { total: 1000, idle: 850, steal: 0 });
+        assert_eq!(a, CpuTimes { total: 1000, idle: 850, steal: 0, own: 0 });
         // 200 ticks passed: 50 idle, 50 stolen.
         assert_eq!(b.since(&a), (0.75, 0.25));
+        // 150 busy ticks, 100 of them this process's: others kept 50 of 200 busy.
+        let (a, b) = (CpuTimes { own: 10, ..a }, CpuTimes { own: 110, ..b });
+        assert_eq!(b.others_since(&a), 0.25);
+        let stat = "1234 (a (b) c) S 1 1 1 0 -1 4194304 100 0 0 0 37 5 0 0 20 0 3 0 100 0 0";
+        assert_eq!(parse_self_stat(stat), Some(42));
     }
 }

@@ -858,12 +858,12 @@ fn summary_table(inp: &Input) -> String {
         t.push_str("</table>\n");
     }
     if inp.busy {
-        let _ = writeln!(
-            t,
-            "<p><b>The machine was busy during this run</b> (load average {} before, {} after): the figures may be off.</p>",
-            esc(&numbers(&inp.load_before)),
-            esc(&numbers(&inp.load_after))
-        );
+        let why = match &inp.busy_reason {
+            Some(why) => why.clone(),
+            None => format!("load average {} before, {} after", numbers(&inp.load_before), numbers(&inp.load_after)),
+        };
+        let _ =
+            writeln!(t, "<p><b>The machine was busy during this run</b> ({}): the figures may be off.</p>", esc(&why));
     }
     t
 }

@@ -58,6 +58,8 @@ pub(super) struct Input {
     /// Embree's version and ISA, when the bench ran against it.
     pub embree: Option<(Option<String>, Option<String>)>,
     pub busy: bool,
+    /// Why the bench judged the machine busy (older reports have none).
+    pub busy_reason: Option<String>,
     pub load_before: Option<Vec<f64>>,
     pub load_after: Option<Vec<f64>>,
     pub builds: Vec<Build>,
@@ -282,6 +284,7 @@ pub(super) fn read_input(path: &Path) -> Result<Input, CliError> {
         isa: raypack.string("isa")?,
         embree,
         busy: j.boolean("busy")?.unwrap_or(false),
+        busy_reason: j.string("busy_reason")?,
         load_before: load.numbers("before")?,
         load_after: load.numbers("after")?,
         builds,
