@@ -10,92 +10,17 @@
 
 use std::io::{BufRead, Read};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// What a child process did.
-#[derive(Debug)]
-struct Run {
-    /// Exit code, `None` when a signal ended it.
-    code: Option<i32>,
-    /// The signal that ended it.
-    signal: Option<i32>,
-    stderr: String,
-    /// Killed by the test after the time limit.
-    timed_out: bool,
-    /// Peak resident memory (VmHWM) seen while it ran, in bytes (polled every 5 ms).
-    peak_bytes: u64,
-}
+mod common;
+use common::child::{Limits, Run, TIMEOUT, TWO_GIB, command_with, finish};
 
-/// Limits a child runs under.
-#[derive(Clone, Copy, Default)]
-struct Limits {
-    /// `ulimit -v`, in bytes.
-    address_space: Option<u64>,
-    /// The umask it starts with.
-    umask: Option<u32>,
-}
-
-const TIMEOUT: Duration = Duration::from_secs(60);
-/// Enough for any render here, far below what the bugs fixed here allocated.
-const TWO_GIB: u64 = 2 << 30;
-
+/// `raypack ARGS` under `limits`, its stdout discarded.
 fn command(args: &[&str], limits: Limits) -> Command {
-    use std::os::unix::process::CommandExt;
-    let mut c = Command::new(env!("CARGO_BIN_EXE_raypack"));
-    c.args(args).stdin(Stdio::null()).stdout(Stdio::null()).stderr(Stdio::piped());
-    // SAFETY: the closure runs between fork and exec and only calls setrlimit and umask,
-    // which are async-signal-safe.
-    unsafe {
-        c.pre_exec(move || {
-            if let Some(bytes) = limits.address_space {
-                let lim = libc::rlimit { rlim_cur: bytes as libc::rlim_t, rlim_max: bytes as libc::rlim_t };
-                if libc::setrlimit(libc::RLIMIT_AS, &lim) != 0 {
-                    return Err(std::io::Error::last_os_error());
-                }
-            }
-            if let Some(mask) = limits.umask {
-                libc::umask(mask as libc::mode_t);
-            }
-            Ok(())
-        });
-    }
+    let mut c = command_with(args, &[], limits);
+    c.stdout(Stdio::null());
     c
-}
-
-/// The peak resident memory of a running process, in bytes.
-fn vm_hwm(pid: u32) -> Option<u64> {
-    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    line.split_whitespace().nth(1)?.parse::<u64>().ok().map(|kib| kib * 1024)
-}
-
-/// Waits for `child` (at most `timeout`, then kills it), collecting its stderr and peak memory.
-fn finish(mut child: Child, timeout: Duration) -> Run {
-    use std::os::unix::process::ExitStatusExt;
-    let mut stderr = child.stderr.take().expect("piped");
-    let reader = std::thread::spawn(move || {
-        let mut s = String::new();
-        let _ = stderr.read_to_string(&mut s);
-        s
-    });
-    let start = Instant::now();
-    let mut peak = 0;
-    let (status, timed_out) = loop {
-        if let Some(b) = vm_hwm(child.id()) {
-            peak = peak.max(b);
-        }
-        if let Some(s) = child.try_wait().expect("wait") {
-            break (s, false);
-        }
-        if start.elapsed() > timeout {
-            let _ = child.kill();
-            break (child.wait().expect("wait"), true);
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    };
-    let stderr = reader.join().unwrap();
-    Run { code: status.code(), signal: status.signal(), stderr, timed_out, peak_bytes: peak }
 }
 
 fn run(args: &[&str], limits: Limits) -> Run {

@@ -152,6 +152,13 @@ fn obj_polylines_missing_materials_and_bad_colours_are_said_out_loud() {
 
 /// A COLLADA document whose one geometry (a grid of `2 n²` triangles) is instanced
 /// `2^levels` times through nested `instance_node`s.
+/// `raypack info PATH --quality fast EXTRA`: its exit code and stderr.
+fn info_fast(path: &std::path::Path, extra: &[&str]) -> (Option<i32>, String) {
+    let args = [&["info", path.to_str().unwrap(), "--quality", "fast"][..], extra].concat();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_raypack")).args(&args).output().unwrap();
+    (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
 fn instanced_grid(n: usize, levels: usize) -> String {
     let g = raypack::generate::grid(n, n);
     let floats: Vec<String> = g.positions.iter().flat_map(|p| [p.x, p.y, p.z]).map(|v| v.to_string()).collect();
@@ -189,11 +196,7 @@ fn instancing_expansion_is_reported_and_capped_by_max_primitives() {
     let doc = instanced_grid(16, 12);
     let path = dir.path().join("inst.dae");
     std::fs::write(&path, &doc).unwrap();
-    let info = |extra: &[&str]| {
-        let args = [&["info", path.to_str().unwrap(), "--quality", "fast"][..], extra].concat();
-        let out = std::process::Command::new(env!("CARGO_BIN_EXE_raypack")).args(&args).output().unwrap();
-        (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
-    };
+    let info = |extra: &[&str]| info_fast(&path, extra);
     // The default budget refuses it, naming the instance and the option.
     let (code, err) = info(&[]);
     assert_eq!(code, Some(2), "{err}");
@@ -245,11 +248,7 @@ fn a_small_file_cannot_need_gigabytes_unless_asked() {
     std::fs::write(&path, &doc).unwrap();
     let cap = raypack::scene::footprint::default_max_primitives(doc.len() as u64);
     assert!(cap < 5_017_600, "the default cap {cap} does not refuse this file");
-    let info = |extra: &[&str]| {
-        let args = [&["info", path.to_str().unwrap(), "--quality", "fast"][..], extra].concat();
-        let out = std::process::Command::new(env!("CARGO_BIN_EXE_raypack")).args(&args).output().unwrap();
-        (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
-    };
+    let info = |extra: &[&str]| info_fast(&path, extra);
     let (code, err) = info(&[]);
     assert_eq!(code, Some(2), "{err}");
     let want = format!("more than the {cap} raypack allows a file of {} bytes without --max-primitives", doc.len());

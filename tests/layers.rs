@@ -6,7 +6,9 @@
 //! it comes from.
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+mod common;
+use common::rust_sources;
+use std::path::Path;
 
 /// The layers of CONTRIBUTING.md's table, in order: each row's backquoted module names.
 fn layer_table(contributing: &str) -> Vec<(String, Vec<String>)> {
@@ -32,17 +34,6 @@ fn layer_table(contributing: &str) -> Vec<(String, Vec<String>)> {
         }
     }
     layers
-}
-
-fn sources(dir: &Path, out: &mut Vec<PathBuf>) {
-    for entry in std::fs::read_dir(dir).unwrap() {
-        let p = entry.unwrap().path();
-        if p.is_dir() {
-            sources(&p, out);
-        } else if p.extension().is_some_and(|e| e == "rs") {
-            out.push(p);
-        }
-    }
 }
 
 fn ident_at(s: &str) -> &str {
@@ -121,9 +112,7 @@ fn nothing_imports_backwards() {
     }
     let reexports = root_reexports(&lib);
 
-    let mut files = Vec::new();
-    sources(&root.join("src"), &mut files);
-    files.sort();
+    let files = rust_sources(&[&root.join("src")]);
     let mut offences = Vec::new();
     for f in &files {
         let rel = f.strip_prefix(root).unwrap().to_string_lossy().replace('\\', "/");

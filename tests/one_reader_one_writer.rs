@@ -5,7 +5,9 @@
 //! library, the CLI and the Python module and fails when a file is opened, read or written
 //! anywhere else, so that the next new input or output cannot skip the rules.
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::rust_sources;
+use std::path::Path;
 
 /// Calls that open, read or write a file by name.
 const FILE_CALLS: [&str; 8] = [
@@ -27,23 +29,10 @@ const ALLOWED: [(&str, &str); 4] = [
     ("src/bin/raypack/machine.rs", "the kernel's own files: /proc"),
 ];
 
-fn sources(dir: &Path, out: &mut Vec<PathBuf>) {
-    for entry in std::fs::read_dir(dir).unwrap() {
-        let p = entry.unwrap().path();
-        if p.is_dir() {
-            sources(&p, out);
-        } else if p.extension().is_some_and(|e| e == "rs") {
-            out.push(p);
-        }
-    }
-}
-
 #[test]
 fn files_are_read_and_written_in_one_place_each() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut files = Vec::new();
-    sources(&root.join("src"), &mut files);
-    sources(&root.join("python/src"), &mut files);
+    let files = rust_sources(&[&root.join("src"), &root.join("python/src")]);
     assert!(files.len() > 50, "the sources were not found: {files:?}");
     let mut offences = Vec::new();
     for f in &files {

@@ -33,21 +33,40 @@ pub fn binary() -> std::ffi::OsString {
     std::env::var_os("RAYPACK_TEST_BIN").unwrap_or_else(|| env!("CARGO_BIN_EXE_raypack").into())
 }
 
+/// Limits a child runs under.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Limits {
+    /// `ulimit -v`, in bytes.
+    pub address_space: Option<u64>,
+    /// The umask it starts with.
+    pub umask: Option<u32>,
+}
+
 /// `raypack ARGS` with its environment plus `env`, under `ulimit -v TWO_GIB`.
 pub fn command(args: &[&str], env: &[(&str, &std::ffi::OsStr)]) -> Command {
+    command_with(args, env, Limits { address_space: Some(TWO_GIB), umask: None })
+}
+
+/// `raypack ARGS` with its environment plus `env`, under `limits`; stdout and stderr piped.
+pub fn command_with(args: &[&str], env: &[(&str, &std::ffi::OsStr)], limits: Limits) -> Command {
     use std::os::unix::process::CommandExt;
     let mut c = Command::new(binary());
     c.args(args).stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped());
     for (k, v) in env {
         c.env(k, v);
     }
-    // SAFETY: the closure runs between fork and exec and only calls setrlimit, which is
-    // async-signal-safe.
+    // SAFETY: the closure runs between fork and exec and only calls setrlimit and umask,
+    // which are async-signal-safe.
     unsafe {
-        c.pre_exec(|| {
-            let lim = libc::rlimit { rlim_cur: TWO_GIB as libc::rlim_t, rlim_max: TWO_GIB as libc::rlim_t };
-            if libc::setrlimit(libc::RLIMIT_AS, &lim) != 0 {
-                return Err(std::io::Error::last_os_error());
+        c.pre_exec(move || {
+            if let Some(bytes) = limits.address_space {
+                let lim = libc::rlimit { rlim_cur: bytes as libc::rlim_t, rlim_max: bytes as libc::rlim_t };
+                if libc::setrlimit(libc::RLIMIT_AS, &lim) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+            }
+            if let Some(mask) = limits.umask {
+                libc::umask(mask as libc::mode_t);
             }
             Ok(())
         });
@@ -55,13 +74,15 @@ pub fn command(args: &[&str], env: &[(&str, &std::ffi::OsStr)]) -> Command {
     c
 }
 
+/// The peak resident memory of a running process, in bytes.
 fn vm_hwm(pid: u32) -> Option<u64> {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     line.split_whitespace().nth(1)?.parse::<u64>().ok().map(|kib| kib * 1024)
 }
 
-/// Waits for `child` (at most `timeout`, then kills it), collecting its output and peak memory.
+/// Waits for `child` (at most `timeout`, then kills it), collecting its output (what was
+/// piped) and peak memory.
 pub fn finish(mut child: Child, timeout: Duration) -> Run {
     use std::os::unix::process::ExitStatusExt;
     let reader = |mut r: Box<dyn Read + Send>| {
@@ -71,8 +92,8 @@ pub fn finish(mut child: Child, timeout: Duration) -> Run {
             String::from_utf8_lossy(&s).into_owned()
         })
     };
-    let err = reader(Box::new(child.stderr.take().expect("piped")));
-    let out = reader(Box::new(child.stdout.take().expect("piped")));
+    let err = reader(child.stderr.take().map_or_else(|| Box::new(std::io::empty()) as _, |r| Box::new(r) as _));
+    let out = reader(child.stdout.take().map_or_else(|| Box::new(std::io::empty()) as _, |r| Box::new(r) as _));
     let start = Instant::now();
     let mut peak = 0;
     let (status, timed_out) = loop {

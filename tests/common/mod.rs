@@ -5,7 +5,7 @@ use raypack::generate::Mesh;
 use raypack::kernels::{KERNELS, Kernel, Results};
 use raypack::rng::Rng;
 use raypack::{BuildOptions, Isa, Material, Ray, Scene, SceneBuilder, Vec3};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 pub mod child;
 
@@ -125,4 +125,24 @@ pub fn slivers(n: usize, seed: u64) -> Mesh {
         m.indices.push([3 * i, 3 * i + 1, 3 * i + 2]);
     }
     m
+}
+
+/// The `.rs` files below each of `dirs`, sorted.
+pub fn rust_sources(dirs: &[&Path]) -> Vec<PathBuf> {
+    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+        for entry in std::fs::read_dir(dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display())) {
+            let p = entry.unwrap().path();
+            if p.is_dir() {
+                walk(&p, out);
+            } else if p.extension().is_some_and(|e| e == "rs") {
+                out.push(p);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    for d in dirs {
+        walk(d, &mut out);
+    }
+    out.sort();
+    out
 }
