@@ -241,8 +241,8 @@ fn instancing_expansion_is_reported_and_capped_by_max_primitives() {
 #[test]
 fn a_small_file_cannot_need_gigabytes_unless_asked() {
     let dir = tempfile::tempdir().unwrap();
-    // 9,800 triangles instanced 2^9 times: 5.0 M triangles (620 MB at its peak) from a file
-    // of a few hundred kilobytes, within the instancing budget. Before, loaded by default.
+    // 9,800 triangles instanced 2^9 times: 5.0 M triangles, hundreds of megabytes to build,
+    // from a file of a few hundred kilobytes, within the instancing budget.
     let doc = instanced_grid(70, 9);
     let path = dir.path().join("inst.dae");
     std::fs::write(&path, &doc).unwrap();

@@ -29,7 +29,7 @@ pub const MAX_RAY_FILE_BYTES: u64 = 4 << 30;
 /// Bench JSON files (`raypack report`) larger than this are refused (a bench of every method
 /// at many thread counts writes tens of kilobytes).
 pub const MAX_BENCH_JSON_BYTES: u64 = 64 << 20;
-/// Font files larger than this are refused (DejaVu Sans is 757 kB).
+/// Font files larger than this are refused (a TrueType font is well under a megabyte).
 pub const MAX_FONT_BYTES: u64 = 64 << 20;
 
 /// What a file that is not a regular file is, for messages: "a FIFO (named pipe)", "a
