@@ -29,6 +29,7 @@ __all__ = [
     "_intersect_stream",
     "_plane_points",
     "_bvh_builds",
+    "_load_for_render",
     "_scene_from_snapshot",
     "SceneWarning",
 ]
@@ -235,6 +236,12 @@ def tile_bounds(count: int, width: int, height: int) -> list[tuple[int, int, int
 # Not public API: helpers of tools/bench-python.py and the tests.
 def _bvh_builds() -> int:
     """How many BVHs this process has built (cache and pickle loads do not count)."""
+
+def _load_for_render(
+    path: _Path, *, quality: _Quality = "medium", watertight: bool = False, bvh_cache: _Path | None = None
+) -> Scene:
+    """``load`` for a render elsewhere (``pyraypack.dask.render(path)``): also warns when the
+    file has no lights, as ``render(path)`` does."""
 
 def _scene_from_snapshot(
     snapshot: bytes, kept: bytes | None, report: tuple[int, int, int, int, int], dropped: bytes | None = None

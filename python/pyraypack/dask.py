@@ -140,14 +140,15 @@ _Integrator = Literal["global", "direct", "direct-only", "indirect-only", "bounc
 
 
 def _load(scene: Any, quality: _Quality, watertight: bool, bvh_cache: Any) -> _raypack.Scene:
-    """The scene, loaded if it is a path; its warnings point at the line that called the
-    public function that called this one."""
+    """The scene, loaded for a render if it is a path (a file without lights says it gets the
+    default rig); its warnings point at the line that called the public function that called
+    this one."""
     if isinstance(scene, _raypack.Scene):
         return scene
     if isinstance(scene, (str, os.PathLike)):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            loaded = _raypack.load(scene, quality=quality, watertight=watertight, bvh_cache=bvh_cache)
+            loaded = _raypack._load_for_render(scene, quality=quality, watertight=watertight, bvh_cache=bvh_cache)
         for w in caught:
             warnings.warn(w.message, w.category, stacklevel=3)
         return loaded
@@ -297,6 +298,16 @@ def _chunks(
     return [(dask.delayed(p, traverse=False),) for p in pieces], rows
 
 
+def _prepare(scene: _raypack.Scene, origins: Any, directions: Any, tnear: Any, tfar: Any, chunk_rays: int, client: Any):
+    """What ``intersect`` and ``occluded`` share: the dask modules, the scene shared with the
+    workers, and the rays' chunks with their row counts."""
+    dask, da = _modules()
+    client = _active_client(client)
+    shared = _share(scene, client)
+    chunks, rows = _chunks(origins, directions, tnear, tfar, chunk_rays, client)
+    return dask, da, shared, chunks, rows
+
+
 def intersect(
     scene: _raypack.Scene,
     origins: Any,
@@ -311,10 +322,7 @@ def intersect(
     (compute them, or persist them on the cluster). ``origins`` and ``directions`` are ``(K,
     3)`` numpy or dask arrays; ``tnear`` and ``tfar`` numbers or ``(K,)`` arrays. Each chunk's
     hits are ``Scene.intersect``'s for its rays; the scene goes to each worker once."""
-    dask, da = _modules()
-    client = _active_client(client)
-    shared = _share(scene, client)
-    chunks, rows = _chunks(origins, directions, tnear, tfar, chunk_rays, client)
+    dask, da, shared, chunks, rows = _prepare(scene, origins, directions, tnear, tfar, chunk_rays, client)
     outputs: list[list[Any]] = [[], [], [], [], []]
     specs = [((), np.float32), ((), np.int64), ((), np.float32), ((), np.float32), ((3,), np.float32)]
     for chunk, n in zip(chunks, rows):
@@ -335,10 +343,7 @@ def occluded(
     client: Any = None,
 ) -> Any:
     """``scene.occluded(...)`` chunk by chunk, as a dask bool array (see ``intersect``)."""
-    dask, da = _modules()
-    client = _active_client(client)
-    shared = _share(scene, client)
-    chunks, rows = _chunks(origins, directions, tnear, tfar, chunk_rays, client)
+    dask, da, shared, chunks, rows = _prepare(scene, origins, directions, tnear, tfar, chunk_rays, client)
     blocks = [
         da.from_delayed(dask.delayed(_occluded_chunk, pure=True)(shared, *chunk), shape=(n,), dtype=bool)
         for chunk, n in zip(chunks, rows)

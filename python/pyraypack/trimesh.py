@@ -222,8 +222,7 @@ class RayMeshIntersector:
         triangle_index : (n,) int
           Index of triangle ray hit, or -1 if not hit
         """
-        _, traced_origins, directions = self._rays(ray_origins, ray_directions)
-        return self._traced[0].intersect(traced_origins, directions, threads=self._options["threads"]).prim
+        return self._query("intersect", ray_origins, ray_directions).prim
 
     def intersects_any(self, ray_origins, ray_directions):
         """Check if a list of rays hits the surface.
@@ -240,8 +239,13 @@ class RayMeshIntersector:
         hit : (n,) bool
           Did each ray hit the surface
         """
+        return self._query("occluded", ray_origins, ray_directions)
+
+    def _query(self, query, ray_origins, ray_directions):
+        """``Scene.intersect`` or ``Scene.occluded`` on the traced mesh, with the rays checked
+        and moved as ``_rays`` does."""
         _, traced_origins, directions = self._rays(ray_origins, ray_directions)
-        return self._traced[0].occluded(traced_origins, directions, threads=self._options["threads"])
+        return getattr(self._traced[0], query)(traced_origins, directions, threads=self._options["threads"])
 
     def contains_points(self, points):
         """Check if a mesh contains a list of points, using ray tests (trimesh's own parity

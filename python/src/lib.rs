@@ -288,7 +288,7 @@ impl PyScene {
         quality: &str,
         watertight: bool,
         bvh_cache: Option<PathBuf>,
-        threads: Option<usize>,
+        #[pyo3(from_py_with = checks::threads)] threads: Option<usize>,
     ) -> PyResult<Self> {
         let build = BuildArgs::new(py, quality, watertight, bvh_cache, threads)?;
         let positions = args::vertices(vertices)?;
@@ -341,7 +341,7 @@ impl PyScene {
         directions: &Bound<'py, PyAny>,
         tnear: Option<&Bound<'py, PyAny>>,
         tfar: Option<&Bound<'py, PyAny>>,
-        threads: Option<usize>,
+        #[pyo3(from_py_with = checks::threads)] threads: Option<usize>,
     ) -> PyResult<Hits> {
         let a = RayArgs::new(origins, directions, tnear, tfar)?;
         let k = a.rays()?.len;
@@ -386,7 +386,7 @@ impl PyScene {
         directions: &Bound<'py, PyAny>,
         tnear: Option<&Bound<'py, PyAny>>,
         tfar: Option<&Bound<'py, PyAny>>,
-        threads: Option<usize>,
+        #[pyo3(from_py_with = checks::threads)] threads: Option<usize>,
     ) -> PyResult<Bound<'py, PyArray1<bool>>> {
         let a = RayArgs::new(origins, directions, tnear, tfar)?;
         let k = a.rays()?.len;
@@ -419,7 +419,7 @@ impl PyScene {
         tfar: Option<&Bound<'py, PyAny>>,
         max_hits: usize,
         min_step: f64,
-        threads: Option<usize>,
+        #[pyo3(from_py_with = checks::threads)] threads: Option<usize>,
     ) -> PyResult<(
         Bound<'py, PyArray1<i64>>,
         Bound<'py, PyArray1<i64>>,
@@ -669,10 +669,25 @@ fn load(
     quality: &str,
     watertight: bool,
     bvh_cache: Option<PathBuf>,
-    threads: Option<usize>,
+    #[pyo3(from_py_with = checks::threads)] threads: Option<usize>,
 ) -> PyResult<PyScene> {
     let build = BuildArgs::new(py, quality, watertight, bvh_cache, threads)?;
     load_path(py, &path, &build, false)
+}
+
+/// `load` for a render elsewhere (`pyraypack.dask.render(path)`): also warns when the file
+/// has no lights, as `render(path)` does.
+#[pyfunction]
+#[pyo3(signature = (path, *, quality = "medium", watertight = false, bvh_cache = None))]
+fn _load_for_render(
+    py: Python<'_>,
+    path: PathBuf,
+    quality: &str,
+    watertight: bool,
+    bvh_cache: Option<PathBuf>,
+) -> PyResult<PyScene> {
+    let build = BuildArgs::new(py, quality, watertight, bvh_cache, None)?;
+    load_path(py, &path, &build, true)
 }
 
 /// Loads and commits a scene file; `for_render`: also warn when the file has no lights (the
@@ -725,7 +740,7 @@ fn render<'py>(
     integrator: &str,
     hemisphere: bool,
     russian_roulette: bool,
-    threads: Option<usize>,
+    #[pyo3(from_py_with = checks::threads)] threads: Option<usize>,
     quality: &str,
     watertight: bool,
     bvh_cache: Option<PathBuf>,
@@ -954,6 +969,7 @@ fn _raypack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(isa, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_function(wrap_pyfunction!(_bvh_builds, m)?)?;
+    m.add_function(wrap_pyfunction!(_load_for_render, m)?)?;
     m.add_function(wrap_pyfunction!(_scene_from_snapshot, m)?)?;
     m.add_function(wrap_pyfunction!(_ray_sets, m)?)?;
     m.add_function(wrap_pyfunction!(_intersect_stream, m)?)?;

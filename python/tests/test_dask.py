@@ -4,6 +4,7 @@ scene goes to each worker once and no worker builds its BVH."""
 
 from __future__ import annotations
 
+import inspect
 import pickle
 import time
 
@@ -30,6 +31,19 @@ def test_local_scheduler_gives_the_same():
     assert hits.t.numblocks == (6,)
     for a, b in zip(hits, scene.intersect(origins, directions, 0.5)):
         assert np.array_equal(a.compute(), b)
+
+
+def test_render_of_a_path_says_the_file_has_no_lights_at_the_callers_line(tmp_path):
+    # As pyraypack.render(path) does: the default light rig is announced, not silently added.
+    obj = tmp_path / "triangle.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.warns(pyraypack.SceneWarning) as caught:
+        line = inspect.currentframe().f_lineno + 1
+        image = pyraypack.dask.render(obj, 8, 6, tiles=2)
+    assert any("no lights in the file" in str(w.message) for w in caught)
+    assert {(w.filename, w.lineno) for w in caught} == {(__file__, line)}
+    with pytest.warns(pyraypack.SceneWarning, match="no lights in the file"):
+        assert np.array_equal(image, pyraypack.render(obj, width=8, height=6))
 
 
 @pytest.fixture(scope="module")

@@ -49,7 +49,7 @@ def test_bad_meshes(vertices, faces, error, message):
     [
         ({"quality": "best"}, ValueError, r"quality: expected 'fast', 'medium' or 'high', got 'best'"),
         ({"threads": 0}, ValueError, r"threads: expected None \(all cores\) or 1 to \d+ threads \(8 per logical CPU; .*\), got 0"),
-        ({"threads": -1}, OverflowError, r"can't convert negative int to unsigned\nwhile processing 'threads'"),
+        ({"threads": -1}, ValueError, r"threads: expected None \(all cores\) or 1 to \d+ threads \(8 per logical CPU; .*\), got -1"),
     ],
 )
 def test_bad_build_options(kwargs, error, message):

@@ -6,6 +6,7 @@ the argument; nothing takes the interpreter down. Risky cases run in a subproces
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 
@@ -97,6 +98,25 @@ def test_thread_counts_are_capped():
         with pytest.raises(ValueError, match=message):
             call()
     s.intersect(V, V, threads=8 * cpus)
+
+
+@pytest.mark.parametrize(
+    "value, error",
+    [(-1, ValueError), (0, ValueError), (2**70, ValueError), (-(2**70), ValueError), ("2", TypeError), (2.0, TypeError), (True, TypeError)],
+)
+def test_thread_arguments_that_are_not_positive_ints_name_the_argument(value, error):
+    # Not the conversion's bare OverflowError or TypeError: every entry point names `threads`.
+    s = pyraypack.Scene(V, F)
+    message = rf"threads: expected None \(all cores\) or 1 to \d+ threads \(8 per logical CPU; .*\), got {re.escape(repr(value))}"
+    for call in (
+        lambda: pyraypack.Scene(V, F, threads=value),
+        lambda: s.intersect(V, V, threads=value),
+        lambda: s.occluded(V, V, threads=value),
+        lambda: s.intersect_all(V, V, threads=value),
+        lambda: pyraypack.render(s, width=4, height=4, threads=value),
+    ):
+        with pytest.raises(error, match=message):
+            call()
 
 
 @pytest.mark.parametrize("value", [b"fastest", b"avx\xff"])
