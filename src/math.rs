@@ -5,6 +5,8 @@
 
 pub use glam::{Mat3, Mat4, Vec2, Vec3, Vec3A, Vec4};
 
+use crate::simd::{F32x1, Lanes, Vec3x};
+
 /// An axis-aligned bounding box. [`Aabb::EMPTY`] has `min = +inf`, `max = -inf`, so it
 /// is the identity of [`Aabb::union`] and no ray's slab test can ever hit it.
 #[repr(C)]
@@ -131,13 +133,24 @@ pub fn safe_recip3(v: Vec3) -> Vec3 {
     Vec3::new(safe_recip(v.x), safe_recip(v.y), safe_recip(v.z))
 }
 
-/// An orthonormal basis `(t, b)` completing the unit vector `n` (Duff et al. 2017).
+/// An orthonormal basis `(t, b)` completing the unit vector `n` (Duff et al. 2017):
+/// [`orthonormal_basis_lanes`] on one lane.
 #[inline]
 pub fn orthonormal_basis(n: Vec3) -> (Vec3, Vec3) {
-    let sign = 1.0f32.copysign(n.z);
-    let a = -1.0 / (sign + n.z);
+    let (t, b) = orthonormal_basis_lanes::<F32x1>(n.into());
+    (t.into(), b.into())
+}
+
+/// [`orthonormal_basis`] of every lane of `n`.
+#[inline(always)]
+pub fn orthonormal_basis_lanes<V: Lanes>(n: Vec3x<V>) -> (Vec3x<V>, Vec3x<V>) {
+    let sign = V::splat(1.0).copysign(n.z);
+    let a = V::splat(-1.0) / (sign + n.z);
     let b = n.x * n.y * a;
-    (Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x), Vec3::new(b, sign + n.y * n.y * a, -n.y))
+    (
+        Vec3x { x: V::splat(1.0) + sign * n.x * n.x * a, y: sign * b, z: -sign * n.x },
+        Vec3x { x: b, y: sign + n.y * n.y * a, z: -n.y },
+    )
 }
 
 #[cfg(test)]

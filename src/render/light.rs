@@ -1,7 +1,7 @@
+// Not split: every kind of light's sampling in one place, with the unit tests that check each against closed forms.
 //! Light sampling: every light of a scene as something that can be sampled from a shading
 //! point: a direction, the distance to the light, the density of that direction per steradian
 //! and the radiance arriving along it (pbrt-v4 `Light::SampleLi`; CS184 `SceneLight::sample_L`).
-//! (Past 600 lines with its unit tests, which check every kind of light against closed forms.)
 //!
 //! The lights are the scene's [`Light`]s plus its emissive geometry, which counts as area
 //! lights: emissive triangles grouped by material (one light per material, a triangle chosen
@@ -23,6 +23,7 @@ use super::frame::Frame;
 use super::sampling::{cosine_hemisphere, uniform_sphere, uniform_triangle};
 use crate::math::Vec3;
 use crate::scene::{Light, Scene};
+use crate::simd::{F32x1, Lanes, Vec3x};
 
 /// Where direct lighting is wanted.
 #[derive(Clone, Copy, Debug)]
@@ -46,6 +47,22 @@ pub struct LightSample {
     pub radiance: Vec3,
     /// Density of `wi` per steradian; 1 for delta lights.
     pub pdf: f32,
+}
+
+/// Samples of a rectangle or point light, a lane each ([`SampledLight::sample_lanes`]): the
+/// fields of [`LightSample`], meaningful in the lanes where `carries` is true.
+#[derive(Clone, Copy, Debug)]
+pub struct LightLanes<V> {
+    /// Unit direction toward the light.
+    pub wi: Vec3x<V>,
+    /// The sampled point on the light.
+    pub point: Vec3x<V>,
+    /// Radiance arriving along `-wi` (points: `I / r²`).
+    pub radiance: Vec3x<V>,
+    /// Density of `wi` per steradian; 1 for points.
+    pub pdf: V,
+    /// True in the lanes whose sample carries light.
+    pub carries: V,
 }
 
 /// A light prepared for sampling.
@@ -126,6 +143,11 @@ impl SampledLight {
         matches!(self, SampledLight::Point { .. } | SampledLight::Spot { .. } | SampledLight::Directional { .. })
     }
 
+    /// True for the kinds [`SampledLight::sample_lanes`] samples (rectangles and points).
+    pub fn in_lanes(&self) -> bool {
+        matches!(self, SampledLight::Rect { .. } | SampledLight::Point { .. })
+    }
+
     /// Samples a direction toward the light from `ctx` with the uniforms `u`; `None` when the
     /// sample carries no light (the light faces away, the point is outside the spot cone...).
     #[inline]
@@ -134,20 +156,60 @@ impl SampledLight {
         // shading loop keeps the sample in registers (faster renders of the CS184 boxes;
         // points inlined as well gained nothing on the dragon; PERFORMANCE.md, "Smaller
         // measured choices"); the other kinds behind a call.
-        let SampledLight::Rect { radiance, center, normal, dim_x, dim_y, area } = self else {
+        let SampledLight::Rect { .. } = self else {
             return self.sample_not_rect(scene, ctx, u);
         };
-        let q = *center + *dim_x * (u.0 - 0.5) + *dim_y * (u.1 - 0.5);
-        let d = q - ctx.p;
-        let d2 = d.length_squared();
-        let wi = d / d2.sqrt();
-        let cos_l = -wi.dot(*normal);
-        (cos_l > 0.0 && d2 > 0.0).then(|| LightSample {
-            wi,
-            point: Some(q),
-            radiance: *radiance,
-            pdf: d2 / (area * cos_l),
+        self.sample_one_lane(ctx.p, u)
+    }
+
+    /// [`SampledLight::sample_lanes`] on one lane, as a [`LightSample`].
+    #[inline(always)]
+    fn sample_one_lane(&self, p: Vec3, u: (f32, f32)) -> Option<LightSample> {
+        let s = self.sample_lanes::<F32x1>(p.into(), F32x1(u.0), F32x1(u.1))?;
+        (s.carries.bitmask() != 0).then(|| LightSample {
+            wi: s.wi.into(),
+            point: Some(s.point.into()),
+            radiance: s.radiance.into(),
+            pdf: s.pdf.0,
         })
+    }
+
+    /// [`SampledLight::sample`] from the points `p` with the uniforms `(u0, u1)`, a lane each,
+    /// for the kinds [`SampledLight::in_lanes`] names (`None` for the others). The context's
+    /// normal is not needed: these kinds do not sample around it.
+    #[inline(always)]
+    pub fn sample_lanes<V: Lanes>(&self, p: Vec3x<V>, u0: V, u1: V) -> Option<LightLanes<V>> {
+        let zero = V::splat(0.0);
+        match *self {
+            SampledLight::Rect { radiance, center, normal, dim_x, dim_y, area } => {
+                let half = V::splat(0.5);
+                let q = Vec3x::splat(center) + Vec3x::splat(dim_x) * (u0 - half) + Vec3x::splat(dim_y) * (u1 - half);
+                let d = q - p;
+                let d2 = d.dot(d);
+                let wi = d / d2.sqrt();
+                let cos_l = -wi.dot(Vec3x::splat(normal));
+                Some(LightLanes {
+                    wi,
+                    point: q,
+                    radiance: Vec3x::splat(radiance),
+                    pdf: d2 / (V::splat(area) * cos_l),
+                    carries: cos_l.gt(zero) & d2.gt(zero),
+                })
+            }
+            SampledLight::Point { position, intensity } => {
+                let q = Vec3x::splat(position);
+                let d = q - p;
+                let d2 = d.dot(d);
+                Some(LightLanes {
+                    wi: d / d2.sqrt(),
+                    point: q,
+                    radiance: Vec3x::splat(intensity) / d2,
+                    pdf: V::splat(1.0),
+                    carries: d2.gt(zero),
+                })
+            }
+            _ => None,
+        }
     }
 
     /// [`SampledLight::sample`] of the kinds other than [`SampledLight::Rect`].
@@ -155,16 +217,7 @@ impl SampledLight {
     fn sample_not_rect(&self, scene: &Scene, ctx: &LightContext, u: (f32, f32)) -> Option<LightSample> {
         let p = ctx.p;
         match self {
-            SampledLight::Point { position, intensity } => {
-                let d = *position - p;
-                let d2 = d.length_squared();
-                (d2 > 0.0).then(|| LightSample {
-                    wi: d / d2.sqrt(),
-                    point: Some(*position),
-                    radiance: *intensity / d2,
-                    pdf: 1.0,
-                })
-            }
+            SampledLight::Point { .. } => self.sample_one_lane(p, u),
             SampledLight::Spot { position, axis, intensity, cos_inner, cos_outer } => {
                 let d = *position - p;
                 let d2 = d.length_squared();

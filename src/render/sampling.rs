@@ -3,6 +3,7 @@
 //! `sampler.cpp`. Directions are in a local frame whose `+z` is the surface normal.
 
 use crate::math::Vec3;
+use crate::simd::{F32x1, Lanes};
 use std::f32::consts::{FRAC_1_PI, FRAC_PI_4, PI, TAU};
 
 /// Uniform direction on the `z >= 0` hemisphere; density [`UNIFORM_HEMISPHERE_PDF`].
@@ -29,36 +30,53 @@ pub fn uniform_sphere(u: (f32, f32)) -> Vec3 {
 /// Density of [`uniform_sphere`] per steradian.
 pub const UNIFORM_SPHERE_PDF: f32 = 1.0 / (4.0 * PI);
 
-/// Shirley–Chiu concentric map of the unit square onto the unit disk.
+/// Shirley–Chiu concentric map of the unit square onto the unit disk:
+/// [`concentric_disk_lanes`] on one lane.
 #[inline]
 pub fn concentric_disk(u: (f32, f32)) -> (f32, f32) {
-    let (a, b) = (2.0 * u.0 - 1.0, 2.0 * u.1 - 1.0);
-    if a == 0.0 && b == 0.0 {
-        return (0.0, 0.0);
-    }
-    // θ = π/4 · b/a, or π/2 − π/4 · a/b (whose cosine and sine are the sine and cosine of
-    // π/4 · a/b): both from one angle in [−π/4, π/4].
-    if a.abs() > b.abs() {
-        let (sin, cos) = sin_cos_quarter(FRAC_PI_4 * (b / a));
-        (a * cos, a * sin)
-    } else {
-        let (sin, cos) = sin_cos_quarter(FRAC_PI_4 * (a / b));
-        (b * sin, b * cos)
-    }
+    let (x, y) = concentric_disk_lanes(F32x1(u.0), F32x1(u.1));
+    (x.0, y.0)
+}
+
+/// [`concentric_disk`] of every lane of `(u0, u1)`.
+#[inline(always)]
+pub fn concentric_disk_lanes<V: Lanes>(u0: V, u1: V) -> (V, V) {
+    let (two, one, zero) = (V::splat(2.0), V::splat(1.0), V::splat(0.0));
+    let (a, b) = (two * u0 - one, two * u1 - one);
+    // θ = π/4 · b/a when |a| > |b|, else π/2 − π/4 · a/b (whose cosine and sine are the sine
+    // and cosine of π/4 · a/b): both from one angle in [−π/4, π/4].
+    let wide_a = a.abs().gt(b.abs());
+    let r = wide_a.select(a, b);
+    let (sin, cos) = sin_cos_quarter_lanes(V::splat(FRAC_PI_4) * (wide_a.select(b, a) / r));
+    let x = r * wide_a.select(cos, sin);
+    let y = r * wide_a.select(sin, cos);
+    // The centre, where the ratio is 0 / 0.
+    let centre = a.eq(zero) & b.eq(zero);
+    (centre.select(zero, x), centre.select(zero, y))
 }
 
 /// `(sin x, cos x)` for `|x| <= π/4` by their Taylor polynomials to x⁹ and x¹⁰ (truncation
 /// error below 3e-9 there, so the result is within about 2 ulp of the exact values): on this
 /// interval, several times cheaper than the library's `sin_cos`, which a cosine-weighted
 /// bounce otherwise pays for at every diffuse hit (PERFORMANCE.md, "Smaller measured
-/// choices").
+/// choices"). [`sin_cos_quarter_lanes`] on one lane.
 #[inline]
 pub fn sin_cos_quarter(x: f32) -> (f32, f32) {
     debug_assert!(x.abs() <= FRAC_PI_4 * (1.0 + 1e-6) || !x.is_finite());
+    let (sin, cos) = sin_cos_quarter_lanes(F32x1(x));
+    (sin.0, cos.0)
+}
+
+/// [`sin_cos_quarter`] of every lane of `x`.
+#[inline(always)]
+pub fn sin_cos_quarter_lanes<V: Lanes>(x: V) -> (V, V) {
+    let c = V::splat;
     let x2 = x * x;
-    let sin = x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362_880.0)))));
-    let cos =
-        1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40_320.0 + x2 * (-1.0 / 3_628_800.0)))));
+    let sin =
+        x * (c(1.0) + x2 * (c(-1.0 / 6.0) + x2 * (c(1.0 / 120.0) + x2 * (c(-1.0 / 5040.0) + x2 * c(1.0 / 362_880.0)))));
+    let cos = c(1.0)
+        + x2 * (c(-0.5)
+            + x2 * (c(1.0 / 24.0) + x2 * (c(-1.0 / 720.0) + x2 * (c(1.0 / 40_320.0) + x2 * c(-1.0 / 3_628_800.0)))));
     (sin, cos)
 }
 

@@ -9,6 +9,7 @@
 
 use crate::math::Vec3;
 use crate::ray::Ray;
+use crate::simd::{F32x1, Lanes, Vec3x};
 
 /// Coordinates smaller than this in magnitude move by an absolute step.
 pub(crate) const ORIGIN: f32 = 1.0 / 32.0;
@@ -17,26 +18,41 @@ pub(crate) const FLOAT_SCALE: f32 = 1.0 / 65536.0;
 /// Units in the last place stepped along the normal, away from the origin.
 pub(crate) const INT_SCALE: f32 = 256.0;
 
-/// `p` moved off its surface along the unit normal `n` (toward the side `n` points to).
+/// `p` moved off its surface along the unit normal `n` (toward the side `n` points to):
+/// [`offset_origin_lanes`] on one lane.
 #[inline]
 pub fn offset_origin(p: Vec3, n: Vec3) -> Vec3 {
-    #[inline]
-    fn one(p: f32, n: f32) -> f32 {
-        if p.abs() < ORIGIN {
-            return p + FLOAT_SCALE * n;
-        }
-        // Step `INT_SCALE * n` units in the last place, away from or toward zero as `n` says.
-        let of_i = (INT_SCALE * n) as i32;
-        let step = if p < 0.0 { -of_i } else { of_i };
-        f32::from_bits((p.to_bits() as i32).wrapping_add(step) as u32)
-    }
-    Vec3::new(one(p.x, n.x), one(p.y, n.y), one(p.z, n.z))
+    offset_origin_lanes::<F32x1>(p.into(), n.into()).into()
 }
 
-/// The geometric normal `ng` turned to the side of direction `dir`.
+/// [`offset_origin`] of every lane.
+#[inline(always)]
+pub fn offset_origin_lanes<V: Lanes>(p: Vec3x<V>, n: Vec3x<V>) -> Vec3x<V> {
+    #[inline(always)]
+    fn one<V: Lanes>(p: V, n: V) -> V {
+        let near = p.abs().lt(V::splat(ORIGIN));
+        // Step `INT_SCALE * n` units in the last place, away from or toward zero as `n` says.
+        // `-k` where `p` is negative: the sign bit flipped.
+        let k = V::splat(INT_SCALE) * n;
+        let stepped = p.add_ulps(k ^ (p.lt(V::splat(0.0)) & V::splat(-0.0)));
+        near.select(p + V::splat(FLOAT_SCALE) * n, stepped)
+    }
+    Vec3x { x: one(p.x, n.x), y: one(p.y, n.y), z: one(p.z, n.z) }
+}
+
+/// The geometric normal `ng` turned to the side of direction `dir`: [`toward_lanes`] on one
+/// lane.
 #[inline]
 pub fn toward(ng: Vec3, dir: Vec3) -> Vec3 {
-    if ng.dot(dir) < 0.0 { -ng } else { ng }
+    toward_lanes::<F32x1>(ng.into(), dir.into()).into()
+}
+
+/// [`toward`] of every lane.
+#[inline(always)]
+pub fn toward_lanes<V: Lanes>(ng: Vec3x<V>, dir: Vec3x<V>) -> Vec3x<V> {
+    // `-ng` where the dot product is negative: the sign bits flipped.
+    let flip = ng.dot(dir).lt(V::splat(0.0)) & V::splat(-0.0);
+    Vec3x { x: ng.x ^ flip, y: ng.y ^ flip, z: ng.z ^ flip }
 }
 
 /// A ray leaving the surface point `p` (geometric normal `ng`) in unit direction `dir`.
@@ -48,18 +64,37 @@ pub fn spawn_ray(p: Vec3, ng: Vec3, dir: Vec3) -> Ray {
 /// A shadow ray from surface point `p` (geometric normal `ng`) to the point `target`, ending
 /// just short of it so that the surface `target` lies on does not occlude it. `None` when
 /// `target` is closer than the offset can resolve (the points touch: nothing can lie between).
+/// [`spawn_ray_to_lanes`] on one lane.
 #[inline]
 pub fn spawn_ray_to(p: Vec3, ng: Vec3, target: Vec3) -> Option<Ray> {
-    let origin = offset_origin(p, toward(ng, target - p));
+    let r = spawn_ray_to_lanes::<F32x1>(p.into(), ng.into(), target.into());
+    (r.ok.bitmask() != 0).then(|| Ray::segment(r.origin.into(), r.dir.into(), 0.0, r.tfar.0))
+}
+
+/// Shadow rays of [`spawn_ray_to_lanes`], a lane each.
+#[derive(Clone, Copy, Debug)]
+pub struct SegmentLanes<V> {
+    /// Origin.
+    pub origin: Vec3x<V>,
+    /// Unit direction.
+    pub dir: Vec3x<V>,
+    /// End (the start is 0).
+    pub tfar: V,
+    /// True in the lanes that have a ray ([`spawn_ray_to`] is not `None`).
+    pub ok: V,
+}
+
+/// [`spawn_ray_to`] of every lane.
+#[inline(always)]
+pub fn spawn_ray_to_lanes<V: Lanes>(p: Vec3x<V>, ng: Vec3x<V>, target: Vec3x<V>) -> SegmentLanes<V> {
+    let origin = offset_origin_lanes(p, toward_lanes(ng, target - p));
     let d = target - origin;
-    let dist = d.length();
+    let dist = d.dot(d).sqrt();
     // Shorten by a relative 1e-4 (pbrt's ShadowEpsilon) and by 64 units in the last place of
     // the target's largest coordinate (its own rounding error is a few).
-    let margin = (dist * 1e-4).max(target.abs().max_element() * (64.0 / 8_388_608.0));
-    if !(dist > 2.0 * margin) {
-        return None;
-    }
-    Some(Ray::segment(origin, d / dist, 0.0, dist - margin))
+    let largest = target.x.abs().vmax(target.y.abs().vmax(target.z.abs()));
+    let margin = (dist * V::splat(1e-4)).vmax(largest * V::splat(64.0 / 8_388_608.0));
+    SegmentLanes { origin, dir: d / dist, tfar: dist - margin, ok: dist.gt(V::splat(2.0) * margin) }
 }
 
 /// A shadow ray from `p` in unit direction `dir` to infinity (directional and environment

@@ -31,6 +31,7 @@ mod portable;
 pub(crate) mod x86;
 
 pub use isa::{Baseline, Isa, IsaError, IsaLanes};
+pub use portable::F32x1;
 pub use wide::{f32x4, f32x8, f32x16, i32x4, i32x8, i32x16};
 
 /// 4 lanes of `f32` of the baseline ISA (an SSE register in a default x86-64 build).
@@ -215,6 +216,22 @@ impl<V: Lanes> Vec3x<V> {
     }
 }
 
+impl From<crate::math::Vec3> for Vec3x<F32x1> {
+    /// The vector as one lane.
+    #[inline(always)]
+    fn from(v: crate::math::Vec3) -> Self {
+        Self::splat(v)
+    }
+}
+
+impl From<Vec3x<F32x1>> for crate::math::Vec3 {
+    /// The vector of the one lane.
+    #[inline(always)]
+    fn from(v: Vec3x<F32x1>) -> Self {
+        crate::math::Vec3::new(v.x.0, v.y.0, v.z.0)
+    }
+}
+
 impl<V: Lanes> Neg for Vec3x<V> {
     type Output = Self;
     /// Lane-wise negation.
@@ -374,6 +391,7 @@ mod tests {
         check_lanes::<F32x8>();
         check_lanes::<F32x16>();
         check_transpose8::<F32x8>();
+        check_lanes::<F32x1>();
         assert_eq!(bits(0b1010_0001).collect::<Vec<_>>(), vec![0, 5, 7]);
     }
 }

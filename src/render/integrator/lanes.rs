@@ -1,10 +1,12 @@
 //! Shading eight paths at a time: [`Integrator::shade`] and [`Integrator::scatter`] for the
 //! common case, a diffuse surface under light sampling, with the arithmetic in SIMD lanes on
-//! the scene's ISA (dispatched as the tracing kernels are) and the operations of the one-path
-//! code in the same order. Rectangle and point lights are sampled in the lanes, other kinds
-//! one path at a time with the uniforms drawn for them. Every path's radiance,
-//! random numbers, direct samples and rays are therefore bit-identical to shading it alone
-//! (unit test on every ISA, and the same images).
+//! the scene's ISA (dispatched as the tracing kernels are). The lanes call the one-path code's
+//! own functions, written once over [`Lanes`] (the one-path code runs them on one lane,
+//! [`crate::simd::F32x1`]): `concentric_disk_lanes`, `orthonormal_basis_lanes`, `toward_lanes`,
+//! `offset_origin_lanes`, `spawn_ray_to_lanes` and [`SampledLight::sample_lanes`] (rectangle
+//! and point lights; other kinds are sampled one path at a time with the uniforms drawn for
+//! them). Every path's radiance, random numbers, direct samples and rays are therefore
+//! bit-identical to shading it alone (unit test on every ISA, and the same images).
 //!
 //! What stays one path at a time: reading its state and surface into rows, its emission,
 //! drawing its random numbers (each path has its own generator, drawn in the order of the
@@ -14,13 +16,16 @@
 
 use super::{Frame, Integrator, PathState};
 use crate::math::Vec3;
+use crate::math::orthonormal_basis_lanes;
 use crate::ray::{Hit, Ray};
 use crate::render::light::SampledLight;
 use crate::render::queue::{DirectQueue, DirectSample};
+use crate::render::sampling::concentric_disk_lanes;
+use crate::render::spawn::{offset_origin_lanes, spawn_ray_to_lanes, toward_lanes};
 use crate::scene::{Bsdf, SurfaceHit};
 use crate::simd::isa::{IsaOp, dispatch};
 use crate::simd::{IsaLanes, Lanes, Vec3x};
-use std::f32::consts::{FRAC_1_PI, FRAC_PI_4};
+use std::f32::consts::FRAC_1_PI;
 
 /// Paths per step.
 pub const STEP: usize = 8;
@@ -28,22 +33,14 @@ pub const STEP: usize = 8;
 /// `N` rows of one value per lane.
 type Rows<const N: usize> = [[f32; STEP]; N];
 
-/// A light the lanes sample.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum LaneLight {
-    /// [`SampledLight::Rect`].
-    Rect { radiance: Vec3, center: Vec3, normal: Vec3, dim_x: Vec3, dim_y: Vec3, area: f32 },
-    /// [`SampledLight::Point`].
-    Point { position: Vec3, intensity: Vec3 },
-}
-
 /// The direct-lighting samples of one shading point, in the order light sampling draws them:
-/// each light (its index is the sample's group) as many times as it is sampled. Rectangles
-/// and points are sampled in the lanes; the other kinds (`None` here) one path at a time,
+/// each light (its index is the sample's group) as many times as it is sampled. The kinds
+/// [`SampledLight::in_lanes`] names are sampled in the lanes; the others one path at a time,
 /// with the uniforms drawn for them in their place.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct LaneLights {
-    samples: Vec<(Option<LaneLight>, u32)>,
+    /// Each sample's light (its group), and whether the lanes sample it.
+    samples: Vec<(u32, bool)>,
     /// True when every sample is taken in the lanes.
     all_lanes: bool,
 }
@@ -54,16 +51,9 @@ impl LaneLights {
         let mut samples = Vec::new();
         for (group, light) in lights.iter().enumerate() {
             let n = if light.is_delta() { 1 } else { per_area.max(1) };
-            let lane = match *light {
-                SampledLight::Rect { radiance, center, normal, dim_x, dim_y, area } => {
-                    Some(LaneLight::Rect { radiance, center, normal, dim_x, dim_y, area })
-                }
-                SampledLight::Point { position, intensity } => Some(LaneLight::Point { position, intensity }),
-                _ => None,
-            };
-            samples.extend(std::iter::repeat_n((lane, group as u32), n as usize));
+            samples.extend(std::iter::repeat_n((group as u32, light.in_lanes()), n as usize));
         }
-        let all_lanes = samples.iter().all(|s| s.0.is_some());
+        let all_lanes = lights.iter().all(SampledLight::in_lanes);
         Self { samples, all_lanes }
     }
 
@@ -205,7 +195,8 @@ impl Integrator<'_> {
                 (r[0][j], r[1][j], r[2][j]) = (v.x, v.y, v.z);
             }
         }
-        dispatch(self.scene.isa(), Step { rows: &mut rows, lights: &lights.samples, samples: scratch });
+        let step = Step { rows: &mut rows, lights: &self.lights.lights, groups: &lights.samples, samples: scratch };
+        dispatch(self.scene.isa(), step);
         let lane3 = |r: &Rows<3>, j: usize| Vec3::new(r[0][j], r[1][j], r[2][j]);
         for j in crate::simd::bits(mask) {
             let k = k0 + j;
@@ -219,30 +210,19 @@ impl Integrator<'_> {
                     let frame = Frame::from_normal(e.surfaces[k].shading_normal);
                     (frame, frame.to_local(-e.rays[k].dir))
                 });
-                for (sample, &(light, group)) in scratch.iter().zip(&lights.samples) {
-                    let Some(light) = light else {
+                for (sample, &(group, in_lanes)) in scratch.iter().zip(&lights.samples) {
+                    if !in_lanes {
+                        let light = &self.lights.lights[group as usize];
                         let (frame, wo) = at.as_ref().expect("a frame for the lights of other kinds");
                         let u = (sample.u[0][j], sample.u[1][j]);
                         let (s, b) = (&e.surfaces[k], &Bsdf::Diffuse { albedo });
-                        self.queue_light_sample(
-                            &self.lights.lights[group as usize],
-                            group,
-                            s,
-                            b,
-                            frame,
-                            *wo,
-                            u,
-                            direct,
-                        );
+                        self.queue_light_sample(light, group, s, b, frame, *wo, u, direct);
                         continue;
-                    };
+                    }
                     if sample.keep >> j & 1 == 0 {
                         continue;
                     }
-                    let radiance = match light {
-                        LaneLight::Rect { radiance, .. } => radiance,
-                        LaneLight::Point { .. } => lane3(&sample.radiance, j),
-                    };
+                    let radiance = lane3(&sample.radiance, j);
                     let shadow = (sample.shadow >> j & 1 != 0)
                         .then(|| Ray::segment(lane3(&sample.origin, j), lane3(&sample.dir, j), 0.0, sample.tfar[j]));
                     let f = albedo * FRAC_1_PI;
@@ -263,7 +243,9 @@ impl Integrator<'_> {
 /// The lanes' part of a step, run on one ISA.
 struct Step<'a> {
     rows: &'a mut StepRows,
-    lights: &'a [(Option<LaneLight>, u32)],
+    /// The integrator's lights, and each sample's light (and whether the lanes sample it).
+    lights: &'a [SampledLight],
+    groups: &'a [(u32, bool)],
     samples: &'a mut [SampleLanes],
 }
 
@@ -271,132 +253,50 @@ impl IsaOp for Step<'_> {
     type Output = ();
     #[inline(always)]
     fn run<I: IsaLanes>(self) {
-        step::<I::F8>(self.rows, self.lights, self.samples)
+        step::<I::F8>(self.rows, self.lights, self.groups, self.samples)
     }
 }
 
-/// The light samples of `rows.direct`'s lanes (into `samples`, one per entry of `lights`) and
-/// the bounce of `rows.scatter`'s lanes; `rows.scatter` keeps the lanes whose bounce carries
-/// light.
+/// The light samples of `rows.direct`'s lanes (into `samples`, one per entry of `groups`, the
+/// index of its light in `lights`) and the bounce of `rows.scatter`'s lanes; `rows.scatter`
+/// keeps the lanes whose bounce carries light. The one-path code's functions, on lanes.
 #[inline(always)]
-fn step<V: Lanes>(rows: &mut StepRows, lights: &[(Option<LaneLight>, u32)], samples: &mut [SampleLanes]) {
+fn step<V: Lanes>(rows: &mut StepRows, lights: &[SampledLight], groups: &[(u32, bool)], samples: &mut [SampleLanes]) {
     debug_assert_eq!(V::LANES, STEP);
     let (p, ng, ns) = (Vec3x::<V>::load_rows(&rows.p), Vec3x::load_rows(&rows.ng), Vec3x::load_rows(&rows.ns));
     let wo_z = V::load(&rows.wo_z);
     let (zero, one) = (V::splat(0.0), V::splat(1.0));
     if rows.direct != 0 {
         let gathers = V::from_bitmask(rows.direct) & V::from_bitmask(rows.reflects);
-        for (&(light, _), s) in lights.iter().zip(samples.iter_mut()) {
-            let Some(light) = light else { continue };
+        for (&(group, _), s) in groups.iter().zip(samples.iter_mut()) {
             let (u0, u1) = (V::load(&s.u[0]), V::load(&s.u[1]));
-            // `SampledLight::sample`.
-            let (q, wi, carries, radiance, pdf) = match light {
-                LaneLight::Rect { radiance, center, normal, dim_x, dim_y, area } => {
-                    let half = V::splat(0.5);
-                    let q =
-                        Vec3x::splat(center) + Vec3x::splat(dim_x) * (u0 - half) + Vec3x::splat(dim_y) * (u1 - half);
-                    let d = q - p;
-                    let d2 = d.dot(d);
-                    let wi = d / d2.sqrt();
-                    let cos_l = -wi.dot(Vec3x::splat(normal));
-                    let carries = cos_l.gt(zero) & d2.gt(zero);
-                    (q, wi, carries, Vec3x::splat(radiance), d2 / (V::splat(area) * cos_l))
-                }
-                LaneLight::Point { position, intensity } => {
-                    let q = Vec3x::splat(position);
-                    let d = q - p;
-                    let d2 = d.dot(d);
-                    (q, d / d2.sqrt(), d2.gt(zero), Vec3x::splat(intensity) / d2, one)
-                }
-            };
+            let Some(ls) = lights[group as usize].sample_lanes(p, u0, u1) else { continue };
             // `Frame::to_local(wi).z`, `bsdf::f` not zero, and a positive density.
-            let wi_z = wi.dot(ns);
-            let keep = carries & gathers & (wo_z * wi_z).gt(zero) & pdf.gt(zero);
+            let wi_z = ls.wi.dot(ns);
+            let keep = ls.carries & gathers & (wo_z * wi_z).gt(zero) & ls.pdf.gt(zero);
             s.keep = keep.bitmask();
-            (wi_z.abs() / pdf).store(&mut s.scale);
-            radiance.store_rows(&mut s.radiance);
-            // `spawn_ray_to(p, ng, q)`.
-            let origin = offset_origin(p, toward(ng, q - p));
-            let d = q - origin;
-            let dist = d.dot(d).sqrt();
-            let qa = Vec3x { x: q.x.abs(), y: q.y.abs(), z: q.z.abs() };
-            let margin = (dist * V::splat(1e-4)).vmax(qa.x.vmax(qa.y.vmax(qa.z)) * V::splat(64.0 / 8_388_608.0));
-            s.shadow = (keep & dist.gt(V::splat(2.0) * margin)).bitmask();
-            origin.store_rows(&mut s.origin);
-            (d / dist).store_rows(&mut s.dir);
-            (dist - margin).store(&mut s.tfar);
+            (wi_z.abs() / ls.pdf).store(&mut s.scale);
+            ls.radiance.store_rows(&mut s.radiance);
+            let shadow = spawn_ray_to_lanes(p, ng, ls.point);
+            s.shadow = (keep & shadow.ok).bitmask();
+            shadow.origin.store_rows(&mut s.origin);
+            shadow.dir.store_rows(&mut s.dir);
+            shadow.tfar.store(&mut s.tfar);
         }
     }
     if rows.scatter != 0 {
         // `bsdf::sample_f` of a diffuse BSDF: `cosine_hemisphere`, then the side of `wo`.
-        let (x, y) = concentric_disk(V::load(&rows.u[0]), V::load(&rows.u[1]));
+        let (x, y) = concentric_disk_lanes(V::load(&rows.u[0]), V::load(&rows.u[1]));
         let z = (one - x * x - y * y).vmax(zero).sqrt();
         let goes = V::from_bitmask(rows.scatter) & !wo_z.eq(zero) & !z.eq(zero);
         rows.scatter = goes.bitmask();
         let z = z.copysign(wo_z);
         // `Frame::to_world` in the frame of `orthonormal_basis(ns)`, then `spawn_ray`.
-        let (tx, ty) = orthonormal_basis(ns);
+        let (tx, ty) = orthonormal_basis_lanes(ns);
         let dir = tx * x + ty * y + ns * z;
-        offset_origin(p, toward(ng, dir)).store_rows(&mut rows.origin);
+        offset_origin_lanes(p, toward_lanes(ng, dir)).store_rows(&mut rows.origin);
         dir.store_rows(&mut rows.dir);
     }
-}
-
-/// `sampling::concentric_disk` per lane.
-#[inline(always)]
-fn concentric_disk<V: Lanes>(u0: V, u1: V) -> (V, V) {
-    let (two, one, zero) = (V::splat(2.0), V::splat(1.0), V::splat(0.0));
-    let (a, b) = (two * u0 - one, two * u1 - one);
-    let wide_a = a.abs().gt(b.abs());
-    let (sin, cos) = sin_cos_quarter(V::splat(FRAC_PI_4) * (wide_a.select(b, a) / wide_a.select(a, b)));
-    let x = wide_a.select(a * cos, b * sin);
-    let y = wide_a.select(a * sin, b * cos);
-    let centre = a.eq(zero) & b.eq(zero);
-    (centre.select(zero, x), centre.select(zero, y))
-}
-
-/// `sampling::sin_cos_quarter` per lane.
-#[inline(always)]
-fn sin_cos_quarter<V: Lanes>(x: V) -> (V, V) {
-    let c = V::splat;
-    let x2 = x * x;
-    let sin =
-        x * (c(1.0) + x2 * (c(-1.0 / 6.0) + x2 * (c(1.0 / 120.0) + x2 * (c(-1.0 / 5040.0) + x2 * c(1.0 / 362_880.0)))));
-    let cos = c(1.0)
-        + x2 * (c(-0.5)
-            + x2 * (c(1.0 / 24.0) + x2 * (c(-1.0 / 720.0) + x2 * (c(1.0 / 40_320.0) + x2 * c(-1.0 / 3_628_800.0)))));
-    (sin, cos)
-}
-
-/// `math::orthonormal_basis` per lane: the tangents of the frame around `n`.
-#[inline(always)]
-fn orthonormal_basis<V: Lanes>(n: Vec3x<V>) -> (Vec3x<V>, Vec3x<V>) {
-    let sign = V::splat(1.0).copysign(n.z);
-    let a = V::splat(-1.0) / (sign + n.z);
-    let b = n.x * n.y * a;
-    (
-        Vec3x { x: V::splat(1.0) + sign * n.x * n.x * a, y: sign * b, z: -sign * n.x },
-        Vec3x { x: b, y: sign + n.y * n.y * a, z: -n.y },
-    )
-}
-
-/// `spawn::toward` per lane.
-#[inline(always)]
-fn toward<V: Lanes>(ng: Vec3x<V>, dir: Vec3x<V>) -> Vec3x<V> {
-    Vec3x::select(ng.dot(dir).lt(V::splat(0.0)), -ng, ng)
-}
-
-/// `spawn::offset_origin` per lane.
-#[inline(always)]
-fn offset_origin<V: Lanes>(p: Vec3x<V>, n: Vec3x<V>) -> Vec3x<V> {
-    #[inline(always)]
-    fn one<V: Lanes>(p: V, n: V) -> V {
-        let near = p.abs().lt(V::splat(crate::render::spawn::ORIGIN));
-        let k = V::splat(crate::render::spawn::INT_SCALE) * n;
-        let stepped = p.add_ulps(p.lt(V::splat(0.0)).select(-k, k));
-        near.select(p + V::splat(crate::render::spawn::FLOAT_SCALE) * n, stepped)
-    }
-    Vec3x { x: one(p.x, n.x), y: one(p.y, n.y), z: one(p.z, n.z) }
 }
 
 #[cfg(test)]
@@ -419,29 +319,17 @@ mod tests {
             let mut v = || (rng.next_f32() - 0.5) * s;
             Vec3::new(v(), v(), v())
         };
-        let lights = [
-            (
-                Some(LaneLight::Rect {
-                    radiance: Vec3::new(5.0, 4.0, 3.0),
-                    center: Vec3::new(0.0, 1.9, 0.0),
-                    normal: Vec3::NEG_Y,
-                    dim_x: Vec3::new(0.5, 0.0, 0.0),
-                    dim_y: Vec3::new(0.0, 0.0, 0.4),
-                    area: 0.2,
-                }),
-                0,
-            ),
-            (Some(LaneLight::Point { position: Vec3::new(0.3, 1.2, -0.4), intensity: Vec3::new(2.0, 1.0, 0.5) }), 1),
+        let sampled = [
+            SampledLight::Rect {
+                radiance: Vec3::new(5.0, 4.0, 3.0),
+                center: Vec3::new(0.0, 1.9, 0.0),
+                normal: Vec3::NEG_Y,
+                dim_x: Vec3::new(0.5, 0.0, 0.0),
+                dim_y: Vec3::new(0.0, 0.0, 0.4),
+                area: 0.2,
+            },
+            SampledLight::Point { position: Vec3::new(0.3, 1.2, -0.4), intensity: Vec3::new(2.0, 1.0, 0.5) },
         ];
-        let sampled: Vec<SampledLight> = lights
-            .iter()
-            .map(|&(l, _)| match l.expect("lane lights") {
-                LaneLight::Rect { radiance, center, normal, dim_x, dim_y, area } => {
-                    SampledLight::Rect { radiance, center, normal, dim_x, dim_y, area }
-                }
-                LaneLight::Point { position, intensity } => SampledLight::Point { position, intensity },
-            })
-            .collect();
         let scene = crate::scene::SceneBuilder::new().commit(&crate::BuildOptions::default()).0;
         for isa in crate::Isa::available() {
             for round in 0..200 {
@@ -488,7 +376,10 @@ mod tests {
                         .flatten();
                     want.push((per_light, bounce));
                 }
-                dispatch(isa, Step { rows: &mut rows, lights: &lights, samples: &mut samples });
+                dispatch(
+                    isa,
+                    Step { rows: &mut rows, lights: &sampled, groups: &[(0, true), (1, true)], samples: &mut samples },
+                );
                 let lane3 = |r: &Rows<3>, j: usize| Vec3::new(r[0][j], r[1][j], r[2][j]);
                 for (j, (per_light, bounce)) in want.iter().enumerate() {
                     for (i, w) in per_light.iter().enumerate() {
@@ -496,7 +387,7 @@ mod tests {
                         assert_eq!(s.keep >> j & 1 != 0, w.is_some(), "{isa:?} round {round} lane {j} light {i}");
                         let Some((scale, radiance, shadow)) = w else { continue };
                         assert_eq!(s.scale[j].to_bits(), scale.to_bits(), "{isa:?} round {round} lane {j}");
-                        if matches!(lights[i].0, Some(LaneLight::Point { .. })) {
+                        if matches!(sampled[i], SampledLight::Point { .. }) {
                             assert_eq!(bits3(lane3(&s.radiance, j)), bits3(*radiance));
                         }
                         assert_eq!(s.shadow >> j & 1 != 0, shadow.is_some(), "{isa:?} round {round} lane {j}");
@@ -545,7 +436,8 @@ mod tests {
             };
             let radiance = |lanes: bool| {
                 let mut integrator = Integrator::new(&scene, &settings);
-                let kinds = integrator.lane_lights.as_ref().map(|l| l.samples.iter().map(|s| s.0.is_some()).collect());
+                let kinds =
+                    integrator.lane_lights.as_ref().map(|l| l.samples.iter().map(|&(_, in_lanes)| in_lanes).collect());
                 // The area light and the point light in the lanes, the emissive triangle not.
                 assert_eq!(kinds.map(|k: Vec<bool>| (k.contains(&true), k.contains(&false))), Some((true, true)));
                 if !lanes {
