@@ -1,6 +1,18 @@
-//! Render statistics: rays by kind, a sparse sample of them, and CS184's "intersection tests
-//! per ray" measured on that sample by the traversal kernels' own counters
-//! ([`crate::bvh::counters`]), so the figure counts the very kernel that traces.
+//! Render statistics, which the renderer keeps as it traces and the CLI prints after a render.
+//!
+//! * [`RayCounts`]: every ray handed to the trace kernels, by [`RayKind`]. Camera rays count
+//!   only when traced: a camera sample that takes a miss's value untraced (its pixel's cone
+//!   of rays misses the scene) is not a ray here. Shadow rays are light sampling's occlusion
+//!   rays (a light sample that touches its point, or carries no light, has none); bounce rays
+//!   are path continuations and, under `-H`, direct lighting's hemisphere rays.
+//! * [`RayLog::sampled`]: of each kind, one ray in 997 in the order traced (the first one
+//!   included), at most 16 per tile: the same rays whatever the thread count or batch sizes.
+//! * [`tests_per_ray`]: CS184's "intersection tests per ray", the mean over those sampled
+//!   rays of [`TraversalCounts::tests`] (inner nodes visited, each one ray against 8 boxes,
+//!   plus primitive blocks tested), counted by tracing each sampled ray again alone through
+//!   the single-ray kernels ([`crate::bvh::counters`]). It is the single-ray traversal's work
+//!   for those rays, not the packet streams' that rendered them (the streams share node
+//!   visits among the rays of a packet); with `--brute-force`, every primitive of the scene.
 
 use crate::bvh::TraversalCounts;
 use crate::ray::Ray;
@@ -72,8 +84,9 @@ const SAMPLE_EVERY: u64 = 997;
 /// At most this many sampled rays of each kind per tile.
 const SAMPLES_PER_TILE: usize = 16;
 
-/// Per-tile ray bookkeeping: counts, and a sparse deterministic sample of the rays. Capacity
-/// is reserved up front, so recording never allocates.
+/// Per-tile ray bookkeeping: the rays traced by kind, and one ray in `SAMPLE_EVERY` of each
+/// kind (at most `SAMPLES_PER_TILE` per tile; see the module docs). Capacity is reserved up
+/// front, so recording never allocates.
 #[derive(Clone, Debug)]
 pub struct RayLog {
     /// Rays traced by kind.
