@@ -133,3 +133,40 @@ fn log_and_percentile_scales_spread_a_skewed_image() {
     assert_eq!(heatmap::percentile(&[0, 0, 0, 0, 0, 0, 0, 0, 3, 5], 90.0), 5);
     assert_eq!(heatmap::percentile(&[0, 0], 90.0), 0);
 }
+
+/// `render` with `IntegratorKind::Heatmap` is the heatmap mode: its picture is the one drawn
+/// from `trace_counts` with the settings' view and scale, a window's counts are those pixels'
+/// counts in the whole image, and a shadow heatmap without a light is the error, not a picture.
+#[test]
+fn render_in_heatmap_mode_returns_the_heatmap() {
+    use raypack::render::heatmap::HeatmapSettings;
+    use raypack::render::{IntegratorKind, PixelBounds, RenderSettings};
+    let (scene, _) = raypack::io::default_scene().commit(&BuildOptions::default());
+    let (width, height) = (48, 36);
+    let camera = scene.camera_or_framing(width as f32 / height as f32);
+    let heatmap = HeatmapSettings { rays: HeatmapRays::Shadow, view: HeatmapView::Both, scale: HeatmapScale::Log };
+    let settings = RenderSettings { width, height, integrator: IntegratorKind::Heatmap, heatmap, ..Default::default() };
+    let out = raypack::render::render(&scene, &camera, &settings, &|_| {});
+    let made = out.heatmap.expect("a heatmap").expect("the box has lights");
+    let counts = heatmap::trace_counts(&scene, &camera, width, height, HeatmapRays::Shadow).unwrap();
+    assert_eq!(made.counts, counts);
+    assert_eq!(made.image, counts.image_scaled(HeatmapView::Both, HeatmapScale::Log));
+    assert_eq!((out.film.width, out.film.height), (width, height));
+
+    let window = PixelBounds { x0: 5, x1: 30, y0: 7, y1: 20 };
+    let part = raypack::render::render_window(&scene, &camera, &settings, &window, &|_| {});
+    let part = part.heatmap.unwrap().unwrap().counts;
+    assert_eq!((part.width, part.height), (25, 13));
+    for y in 7..20 {
+        for x in 5..30 {
+            let (i, j) = ((y - 7) * 25 + x - 5, y * width + x);
+            assert_eq!((part.nodes[i], part.tests[i]), (counts.nodes[j], counts.tests[j]), "pixel ({x}, {y})");
+        }
+    }
+
+    let dark = common::scene_of(&[&raypack::generate::grid(4, 4)], &[], &BuildOptions::default());
+    let out = raypack::render::render(&dark, &dark.camera_or_framing(1.0), &settings, &|_| {});
+    assert_eq!(out.heatmap, Some(Err(heatmap::HeatmapError::NoLight)));
+    let path = RenderSettings { integrator: IntegratorKind::Global, ..settings };
+    assert!(raypack::render::render(&scene, &camera, &path, &|_| {}).heatmap.is_none());
+}

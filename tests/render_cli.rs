@@ -74,14 +74,17 @@ fn adaptive_render_writes_image_and_rate_image_and_reports_per_ray_kind() {
 #[test]
 fn integrator_names_and_bad_values() {
     let dir = scratch_dir("names");
-    for name in ["normals", "direct", "global", "direct-only", "indirect-only", "bounce"] {
+    // The library's names (`IntegratorKind::name`), which the CLI takes as they are.
+    let all = raypack::render::IntegratorKind::ALL.map(|k| k.name());
+    for name in all {
         let path = dir.join(format!("{name}.png"));
         let (ok, log) = raypack(&["-r", "16", "12", "--integrator", name, "-m", "2", "-f", path.to_str().unwrap()]);
         assert!(ok && path.exists(), "{name}: {log}");
     }
     let (ok, log) =
         raypack(&["-r", "16", "12", "--integrator", "photon-mapping", "-f", dir.join("x.png").to_str().unwrap()]);
-    assert!(!ok && log.contains("photon-mapping"), "{log}");
+    assert!(!ok && log.contains("photon-mapping") && log.contains("--integrator"), "{log}");
+    assert!(all.iter().all(|name| log.contains(name)), "the choices are listed: {log}");
     // Without -a there is no rate image.
     assert!(!dir.join("global_rate.png").exists());
     std::fs::remove_dir_all(&dir).unwrap();

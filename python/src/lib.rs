@@ -99,19 +99,13 @@ fn parse_quality(q: &str) -> PyResult<BuildQuality> {
 }
 
 fn parse_integrator(name: &str) -> PyResult<IntegratorKind> {
-    Ok(match name {
-        "global" => IntegratorKind::Global,
-        "direct" => IntegratorKind::Direct,
-        "direct-only" | "direct_only" => IntegratorKind::DirectOnly,
-        "indirect-only" | "indirect_only" => IntegratorKind::IndirectOnly,
-        "bounce" => IntegratorKind::Bounce,
-        "normals" => IntegratorKind::Normals,
-        _ => {
-            return Err(PyValueError::new_err(format!(
-                "integrator: expected 'global', 'direct', 'direct-only', 'indirect-only', 'bounce' or 'normals', got '{name}'"
-            )));
-        }
-    })
+    match name.parse::<IntegratorKind>() {
+        // A picture of the traversal's cost, not radiance: the CLI's (`raypack render --integrator heatmap`).
+        Ok(IntegratorKind::Heatmap) | Err(_) => Err(PyValueError::new_err(format!(
+            "integrator: expected 'global', 'direct', 'direct-only', 'indirect-only', 'bounce' or 'normals', got '{name}'"
+        ))),
+        Ok(kind) => Ok(kind),
+    }
 }
 
 fn load_error(e: LoadError) -> PyErr {
@@ -778,6 +772,7 @@ fn render<'py>(
         hemisphere_sampling: hemisphere,
         adaptive: None,
         integrator: parse_integrator(integrator)?,
+        heatmap: Default::default(),
         seed,
         brute_force: false,
         russian_roulette,

@@ -9,11 +9,16 @@
 //! spheres at once). The image maps a count linearly onto viridis, 0 to the largest count of
 //! the view (or its logarithm, or up to a percentile: [`HeatmapScale`]), each half titled, with
 //! a colour bar labelled with round counts and the mean below it ([`super::colorbar`]).
+//!
+//! It is a render mode: [`super::render`] with [`super::IntegratorKind::Heatmap`] returns it
+//! ([`super::RenderOutput::heatmap`], made by [`render_window`] from
+//! [`super::RenderSettings::heatmap`]); the CLI only chooses it and writes the picture.
 
 use super::camera::CameraRays;
 #[cfg(feature = "image")]
 use super::colorbar;
 use super::spawn::{spawn_ray, spawn_ray_to};
+use super::window::PixelBounds;
 use crate::bvh::TraversalCounts;
 use crate::ray::Ray;
 use crate::scene::{Camera, Light, Scene};
@@ -44,11 +49,53 @@ pub enum HeatmapView {
 }
 
 /// Why a heatmap cannot be made.
-#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+#[derive(Clone, Debug, thiserror::Error, PartialEq, Eq)]
 pub enum HeatmapError {
     /// `--heatmap-rays shadow` on a scene without a light.
     #[error("shadow-ray heatmap: the scene has no light to cast shadow rays toward")]
     NoLight,
+}
+
+/// What a heatmap render ([`super::IntegratorKind::Heatmap`]) shows.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HeatmapSettings {
+    /// The rays counted.
+    pub rays: HeatmapRays,
+    /// The counts drawn.
+    pub view: HeatmapView,
+    /// How counts map to colours.
+    pub scale: HeatmapScale,
+}
+
+/// What a heatmap render makes: the counts of every pixel of its window and, with the cargo
+/// feature `image`, their picture.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Heatmap {
+    /// The rays counted.
+    pub rays: HeatmapRays,
+    /// The kernel's work per pixel of the window.
+    pub counts: HeatmapCounts,
+    /// The picture of [`HeatmapSettings::view`] on [`HeatmapSettings::scale`].
+    #[cfg(feature = "image")]
+    pub image: HeatmapImage,
+}
+
+/// The heatmap of `window`'s pixels of the image `settings` describe, as `settings.heatmap`
+/// asks: what [`super::render_window`] returns for [`super::IntegratorKind::Heatmap`].
+pub fn render_window(
+    scene: &Scene,
+    camera: &Camera,
+    settings: &super::RenderSettings,
+    window: &PixelBounds,
+) -> Result<Heatmap, HeatmapError> {
+    let h = &settings.heatmap;
+    let counts = trace_counts_window(scene, camera, settings.width, settings.height, window, h.rays)?;
+    Ok(Heatmap {
+        rays: h.rays,
+        #[cfg(feature = "image")]
+        image: counts.image_scaled(h.view, h.scale),
+        counts,
+    })
 }
 
 /// Per-pixel traversal work, row-major, top row first.
@@ -95,16 +142,29 @@ pub fn trace_counts(
     height: usize,
     which: HeatmapRays,
 ) -> Result<HeatmapCounts, HeatmapError> {
+    trace_counts_window(scene, camera, width, height, &PixelBounds::full(width, height), which)
+}
+
+/// [`trace_counts`] of the pixels of `window` only (inside the `width × height` image): each
+/// pixel's counts are those it has in the whole image.
+pub fn trace_counts_window(
+    scene: &Scene,
+    camera: &Camera,
+    width: usize,
+    height: usize,
+    window: &PixelBounds,
+    which: HeatmapRays,
+) -> Result<HeatmapCounts, HeatmapError> {
     let light = match which {
         HeatmapRays::Camera => None,
         HeatmapRays::Shadow => Some(*scene.lights.first().ok_or(HeatmapError::NoLight)?),
     };
     let rays = CameraRays::new(camera);
-    let rows: Vec<(Vec<u32>, Vec<u32>)> = (0..height)
+    let rows: Vec<(Vec<u32>, Vec<u32>)> = (window.y0..window.y1)
         .into_par_iter()
         .map(|y| {
-            let mut row = (Vec::with_capacity(width), Vec::with_capacity(width));
-            for x in 0..width {
+            let mut row = (Vec::with_capacity(window.width()), Vec::with_capacity(window.width()));
+            for x in window.x0..window.x1 {
                 let ray = pixel_ray(&rays, x, y, width, height);
                 let mut c = TraversalCounts::default();
                 match &light {
@@ -123,7 +183,8 @@ pub fn trace_counts(
             row
         })
         .collect();
-    let mut out = HeatmapCounts { width, height, nodes: Vec::new(), tests: Vec::new() };
+    let mut out =
+        HeatmapCounts { width: window.width(), height: window.height(), nodes: Vec::new(), tests: Vec::new() };
     for (n, t) in rows {
         out.nodes.extend(n);
         out.tests.extend(t);

@@ -51,20 +51,25 @@ pub enum IntegratorKind {
     IndirectOnly,
     /// Exactly `-m` bounces (CS184's per-bounce images).
     Bounce,
+    /// Not radiance: the traversal cost per pixel, a picture of the BVH kernel's work for one
+    /// ray per pixel ([`super::heatmap`]; what it shows: [`super::RenderSettings::heatmap`]).
+    Heatmap,
 }
 
 impl IntegratorKind {
     /// Every integrator.
-    pub const ALL: [IntegratorKind; 6] = [
+    pub const ALL: [IntegratorKind; 7] = [
         IntegratorKind::Normals,
         IntegratorKind::Direct,
         IntegratorKind::Global,
         IntegratorKind::DirectOnly,
         IntegratorKind::IndirectOnly,
         IntegratorKind::Bounce,
+        IntegratorKind::Heatmap,
     ];
 
-    /// The name `--integrator` takes (`direct-only`, …).
+    /// The name `--integrator` and Python's `integrator=` take (`direct-only`, …), which
+    /// [`str::parse`] reads back.
     pub fn name(&self) -> &'static str {
         match self {
             IntegratorKind::Normals => "normals",
@@ -73,10 +78,27 @@ impl IntegratorKind {
             IntegratorKind::DirectOnly => "direct-only",
             IntegratorKind::IndirectOnly => "indirect-only",
             IntegratorKind::Bounce => "bounce",
+            IntegratorKind::Heatmap => "heatmap",
         }
     }
 
-    /// The integrator of [`IntegratorKind::name`].
+    /// What the integrator computes, in a line (the CLI's help for each choice).
+    pub fn description(&self) -> &'static str {
+        match self {
+            IntegratorKind::Normals => "Shading normals as colours (CS184 parts 1-2)",
+            IntegratorKind::Direct => "Emission plus direct lighting (CS184 part 3): bounces 0 and 1",
+            IntegratorKind::Global => "Global illumination up to -m bounces (CS184 part 4)",
+            IntegratorKind::DirectOnly => "Only direct lighting: bounce 1",
+            IntegratorKind::IndirectOnly => "Only indirect lighting: bounces 2 to -m",
+            IntegratorKind::Bounce => "Exactly -m bounces",
+            IntegratorKind::Heatmap => {
+                "Traversal cost per pixel: the BVH kernel's node visits or primitive tests for one ray per pixel \
+                 (--heatmap, --heatmap-rays), coloured with viridis and a labelled colour bar"
+            }
+        }
+    }
+
+    /// The integrator of [`IntegratorKind::name`] (exactly that name).
     pub fn from_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|k| k.name() == name)
     }
@@ -84,22 +106,52 @@ impl IntegratorKind {
     /// How the film of this integrator is encoded to 8 bits.
     pub fn encoding(&self) -> Encoding {
         match self {
-            IntegratorKind::Normals => Encoding::Display,
+            IntegratorKind::Normals | IntegratorKind::Heatmap => Encoding::Display,
             _ => Encoding::Srgb,
         }
     }
 
     /// The inclusive range of bounces counted with maximum depth `max_depth`; `None` for
-    /// [`IntegratorKind::Normals`]. The range may be empty (`lo > hi`).
+    /// [`IntegratorKind::Normals`] and [`IntegratorKind::Heatmap`]. The range may be empty
+    /// (`lo > hi`).
     pub fn bounces(&self, max_depth: u32) -> Option<(u32, u32)> {
         match self {
-            IntegratorKind::Normals => None,
+            IntegratorKind::Normals | IntegratorKind::Heatmap => None,
             IntegratorKind::Direct => Some((0, 1)),
             IntegratorKind::Global => Some((0, max_depth)),
             IntegratorKind::DirectOnly => Some((1, 1)),
             IntegratorKind::IndirectOnly => Some((2, max_depth)),
             IntegratorKind::Bounce => Some((max_depth, max_depth)),
         }
+    }
+}
+
+impl std::fmt::Display for IntegratorKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A name that is no integrator's ([`IntegratorKind`]'s `FromStr`).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("unknown integrator '{0}': expected {choices}", choices = IntegratorKind::choices())]
+pub struct UnknownIntegrator(pub String);
+
+impl IntegratorKind {
+    /// The names, quoted and listed: `'normals', 'direct', … or 'heatmap'`.
+    fn choices() -> String {
+        let names: Vec<String> = Self::ALL.iter().map(|k| format!("'{}'", k.name())).collect();
+        format!("{} or {}", names[..names.len() - 1].join(", "), names[names.len() - 1])
+    }
+}
+
+impl std::str::FromStr for IntegratorKind {
+    type Err = UnknownIntegrator;
+    /// [`IntegratorKind::name`], in any case, with `_` for `-` (`direct_only`) and spaces
+    /// around it allowed.
+    fn from_str(s: &str) -> Result<Self, UnknownIntegrator> {
+        let name = s.trim().to_ascii_lowercase().replace('_', "-");
+        Self::from_name(&name).ok_or_else(|| UnknownIntegrator(s.to_string()))
     }
 }
 
@@ -436,5 +488,26 @@ impl<'a> Integrator<'a> {
             let scale = wi.z.abs() / UNIFORM_HEMISPHERE_PDF;
             out.push_probe(DirectSample { f, radiance: Vec3::ZERO, scale, group: HEMISPHERE, visible: true }, ray);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_parse_back_and_unknown_names_list_the_choices() {
+        for kind in IntegratorKind::ALL {
+            assert_eq!(kind.name().parse::<IntegratorKind>(), Ok(kind));
+            assert_eq!(kind.to_string(), kind.name());
+            assert_eq!(IntegratorKind::from_name(kind.name()), Some(kind));
+        }
+        assert_eq!(" Direct_Only ".parse::<IntegratorKind>(), Ok(IntegratorKind::DirectOnly));
+        let err = "photons".parse::<IntegratorKind>().unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "unknown integrator 'photons': expected 'normals', 'direct', 'global', 'direct-only', 'indirect-only', \
+             'bounce' or 'heatmap'"
+        );
     }
 }

@@ -36,7 +36,7 @@ pub mod wavefront;
 pub mod window;
 
 pub use film::{Encoding, Film, ImageError, ImageFormat};
-pub use integrator::IntegratorKind;
+pub use integrator::{IntegratorKind, UnknownIntegrator};
 pub use memory::{render_bytes, render_bytes_per_pixel};
 pub use order::RayOrder;
 pub use stats::{RayCounts, RayKind, RayLog};
@@ -74,15 +74,16 @@ pub struct RenderSettings {
     pub adaptive: Option<(u32, f32)>,
     /// What to compute per camera ray.
     pub integrator: IntegratorKind,
+    /// What [`IntegratorKind::Heatmap`] shows (the other integrators ignore it).
+    pub heatmap: heatmap::HeatmapSettings,
     /// Seed of all random numbers.
     pub seed: u64,
     /// Test every primitive instead of using the BVH (CS184's "without BVH" timing).
     pub brute_force: bool,
     /// Terminate paths by Russian roulette from the second bounce on (unbiased).
     pub russian_roulette: bool,
-    /// How secondary rays are ordered before they are traced; `None`: what was measured
-    /// fastest for the scene's kernels ([`StreamOrder::default_for`]). The image is the same
-    /// whatever the order.
+    /// How secondary rays are ordered before they are traced; `None`: the default order,
+    /// measured fastest ([`StreamOrder`]). The image is the same whatever the order.
     pub stream_order: Option<StreamOrder>,
     /// Largest value a camera sample's radiance may have in any RGB component (pbrt-v4's
     /// film `maxcomponentvalue`): a sample above it is scaled down so that its largest
@@ -108,6 +109,7 @@ impl Default for RenderSettings {
             hemisphere_sampling: false,
             adaptive: None,
             integrator: IntegratorKind::Global,
+            heatmap: heatmap::HeatmapSettings::default(),
             seed: 0,
             brute_force: false,
             russian_roulette: true,
@@ -155,6 +157,10 @@ pub struct RenderOutput {
     pub samples_per_pixel: Vec<u32>,
     /// Measurements.
     pub stats: RenderStats,
+    /// What [`IntegratorKind::Heatmap`] made (its picture, or why it could not be made);
+    /// `None` for the other integrators. A heatmap render's film is black, its samples one
+    /// per pixel and its statistics its time only.
+    pub heatmap: Option<Result<heatmap::Heatmap, heatmap::HeatmapError>>,
 }
 
 /// Samples per pixel per pass: bounds the per-tile buffers, whatever `-s` and the adaptive
@@ -188,11 +194,18 @@ pub fn render_window(
     use rayon::prelude::*;
     let window = window.within(settings.width, settings.height).unwrap_or_else(|e| panic!("render_window: {e}"));
     let start = Instant::now();
+    if settings.integrator == IntegratorKind::Heatmap {
+        let made = heatmap::render_window(scene, camera, settings, &window);
+        progress(tiles_in(&window) as u64);
+        let stats = RenderStats { time: start.elapsed(), ..RenderStats::default() };
+        let (film, spp) = (Film::new(window.width(), window.height()), vec![1; window.width() * window.height()]);
+        return RenderOutput { film, window, samples_per_pixel: spp, stats, heatmap: Some(made) };
+    }
     let tiles = tiles_of(&window);
     let done = AtomicU64::new(0);
     let integrator = integrator::Integrator::new(scene, settings);
     let camera = camera::CameraRays::new(camera);
-    let order = settings.stream_order.unwrap_or_else(|| StreamOrder::default_for(scene.isa()));
+    let order = settings.stream_order.unwrap_or_default();
     let wavefronts = Wavefronts::for_pool();
     let rendered: Vec<TileResult> = tiles
         .par_iter()
@@ -225,7 +238,7 @@ pub fn render_window(
     stats.rays = log.counts;
     stats.sampled_rays = log.sampled;
     stats.time = start.elapsed();
-    RenderOutput { film, window, samples_per_pixel: spp, stats }
+    RenderOutput { film, window, samples_per_pixel: spp, stats, heatmap: None }
 }
 
 /// The number of tiles a render of `window` takes (what its `progress` counts up to).

@@ -139,6 +139,8 @@ fn settings_fields(s: &RenderSettings) -> Vec<(String, String)> {
         // culling (tests/render_wavefront.rs).
         stream_order: _,
         pixel_culling: _,
+        // Parts are rendered by the path tracer only (the heatmap renders whole images).
+        heatmap: _,
     } = s;
     let adaptive = adaptive.map_or("off".to_string(), |(b, t)| format!("{b} {t:?}"));
     let clamp = max_sample_value.map_or("off".to_string(), |v| format!("{v:?}"));

@@ -32,22 +32,15 @@ use crate::ray::{Hit, Ray};
 use crate::scene::SurfaceHit;
 use std::time::{Duration, Instant};
 
-/// How secondary rays are ordered before each stream.
+/// How secondary rays are ordered before each stream. The default, shading order for both
+/// streams, is the order measured fastest on every ISA tier (no sort made the streams of a
+/// wave trace faster, and sorting costs: PERFORMANCE.md, "Secondary ray order").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct StreamOrder {
     /// Shadow rays.
     pub shadow: RayOrder,
     /// Continuation rays (and hemisphere rays).
     pub bounce: RayOrder,
-}
-
-impl StreamOrder {
-    /// The order measured fastest on `isa`'s kernels: shading order for both streams on
-    /// AVX-512 and AVX2 alike (no sort made the streams of a 1024-path wave trace faster on
-    /// CBbunny or the Stanford dragon, and sorting costs; see the README).
-    pub fn default_for(_isa: crate::Isa) -> Self {
-        Self::default()
-    }
 }
 
 /// One worker's wavefront: the paths of a batch and its queues, reused from batch to batch.

@@ -1,13 +1,14 @@
-//! `raypack render --integrator heatmap`: the traversal-cost heatmap
-//! ([`raypack::render::heatmap`]) of a scene, written as a PNG whole or not at all.
+//! `raypack render --integrator heatmap`: the flags of the traversal-cost heatmap, which the
+//! library renders ([`raypack::render::IntegratorKind::Heatmap`]), and its picture written as
+//! a PNG whole or not at all.
 
 use crate::say;
 use crate::{CliError, RenderArgs, commit, load, print_warnings};
 use clap::ValueEnum;
 use raypack::BuildOptions;
-use raypack::render::heatmap::{self, HeatmapRays, HeatmapScale, HeatmapView};
+use raypack::render::heatmap::{Heatmap, HeatmapRays, HeatmapScale, HeatmapSettings, HeatmapView};
+use raypack::render::{IntegratorKind, RenderSettings};
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 /// `--heatmap`: which counts the image shows.
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -82,18 +83,23 @@ pub(crate) fn cmd_heatmap(a: RenderArgs) -> Result<(), CliError> {
         }
         let camera = file_camera.unwrap_or_else(|| scene.camera_or_framing(width as f32 / height as f32));
         let rays = a.heatmap_rays.unwrap_or(RaysArg::Camera);
-        let which = match rays {
-            RaysArg::Camera => HeatmapRays::Camera,
-            RaysArg::Shadow => HeatmapRays::Shadow,
+        let heatmap = HeatmapSettings {
+            rays: match rays {
+                RaysArg::Camera => HeatmapRays::Camera,
+                RaysArg::Shadow => HeatmapRays::Shadow,
+            },
+            view: match a.heatmap.unwrap_or(ViewArg::Nodes) {
+                ViewArg::Nodes => HeatmapView::Nodes,
+                ViewArg::Tests => HeatmapView::Tests,
+                ViewArg::Both => HeatmapView::Both,
+            },
+            scale: a.heatmap_scale.unwrap_or_default(),
         };
-        let view = match a.heatmap.unwrap_or(ViewArg::Nodes) {
-            ViewArg::Nodes => HeatmapView::Nodes,
-            ViewArg::Tests => HeatmapView::Tests,
-            ViewArg::Both => HeatmapView::Both,
-        };
-        let t = Instant::now();
-        let counts =
-            heatmap::trace_counts(&scene, &camera, width, height, which).map_err(|e| CliError::Usage(e.to_string()))?;
+        let settings =
+            RenderSettings { width, height, integrator: IntegratorKind::Heatmap, heatmap, ..Default::default() };
+        let out = raypack::render::render(&scene, &camera, &settings, &|_| {});
+        let made = out.heatmap.expect("a heatmap render makes a heatmap");
+        let Heatmap { counts, image, .. } = made.map_err(|e| CliError::Usage(e.to_string()))?;
         let stat = |v: &[u32]| {
             let max = v.iter().copied().max().unwrap_or(0);
             let mean = v.iter().map(|&c| c as f64).sum::<f64>() / v.len().max(1) as f64;
@@ -103,11 +109,10 @@ pub(crate) fn cmd_heatmap(a: RenderArgs) -> Result<(), CliError> {
             "Heatmap of {} rays ({} kernels, {:.4} s): nodes visited {}; primitive-block tests {}",
             rays.to_possible_value().map_or("camera".into(), |v| v.get_name().to_owned()),
             scene.isa(),
-            t.elapsed().as_secs_f64(),
+            out.stats.time.as_secs_f64(),
             stat(&counts.nodes),
             stat(&counts.tests)
         ));
-        let image = counts.image_scaled(view, a.heatmap_scale.unwrap_or_default());
         let bytes = raypack::render::film::encode_png(image.width, image.height, &image.rgb)
             .map_err(|message| raypack::render::ImageError::Encode { path: output.clone(), message })?;
         if to_stdout {

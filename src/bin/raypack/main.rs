@@ -159,38 +159,12 @@ const MAX_PRIMITIVES_HELP: &str = "Refuse scenes of more than N triangles and sp
     least 2^20). With it, that budget becomes at least 4 per primitive allowed. A service sets its \
     own cap here.";
 
-#[derive(Clone, Copy, Debug, ValueEnum)]
-enum IntegratorArg {
-    /// Shading normals as colours (CS184 parts 1-2).
-    Normals,
-    /// Emission plus direct lighting (CS184 part 3): bounces 0 and 1.
-    Direct,
-    /// Global illumination up to -m bounces (CS184 part 4).
-    Global,
-    /// Only direct lighting: bounce 1.
-    DirectOnly,
-    /// Only indirect lighting: bounces 2 to -m.
-    IndirectOnly,
-    /// Exactly -m bounces.
-    Bounce,
-    /// Traversal cost per pixel: the BVH kernel's node visits or primitive tests for one ray
-    /// per pixel (--heatmap, --heatmap-rays), coloured with viridis and a labelled colour bar.
-    Heatmap,
-}
-
-impl IntegratorArg {
-    /// The path tracer's integrator; `None` for the heatmap, which is not one.
-    fn kind(self) -> Option<IntegratorKind> {
-        Some(match self {
-            IntegratorArg::Normals => IntegratorKind::Normals,
-            IntegratorArg::Direct => IntegratorKind::Direct,
-            IntegratorArg::Global => IntegratorKind::Global,
-            IntegratorArg::DirectOnly => IntegratorKind::DirectOnly,
-            IntegratorArg::IndirectOnly => IntegratorKind::IndirectOnly,
-            IntegratorArg::Bounce => IntegratorKind::Bounce,
-            IntegratorArg::Heatmap => return None,
-        })
-    }
+/// `--integrator`: the library's names and descriptions ([`IntegratorKind::ALL`]), read by
+/// its `FromStr`.
+fn integrator_parser() -> impl clap::builder::TypedValueParser<Value = IntegratorKind> {
+    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+    PossibleValuesParser::new(IntegratorKind::ALL.map(|k| PossibleValue::new(k.name()).help(k.description())))
+        .try_map(|name| name.parse::<IntegratorKind>())
 }
 
 #[derive(Args)]
@@ -247,8 +221,8 @@ struct RenderArgs {
     #[arg(short = 'H', long = "hemisphere")]
     hemisphere: bool,
     /// What to compute per camera ray.
-    #[arg(long, value_enum, default_value_t = IntegratorArg::Global)]
-    integrator: IntegratorArg,
+    #[arg(long, value_parser = integrator_parser(), default_value_t = IntegratorKind::Global)]
+    integrator: IntegratorKind,
     /// With --integrator heatmap: which count the image shows [default: nodes].
     #[arg(long, value_enum)]
     heatmap: Option<heatmap::ViewArg>,
@@ -290,11 +264,11 @@ struct RenderArgs {
     #[arg(long, value_parser = parse_isa)]
     isa: Option<Isa>,
     /// Order of the shadow-ray streams (default: the one measured fastest for the kernels).
-    #[arg(long, value_enum)]
-    shadow_order: Option<RayOrderArg>,
+    #[arg(long, value_parser = ray_order_parser())]
+    shadow_order: Option<raypack::render::RayOrder>,
     /// Order of the bounce-ray streams (default: the one measured fastest for the kernels).
-    #[arg(long, value_enum)]
-    bounce_order: Option<RayOrderArg>,
+    #[arg(long, value_parser = ray_order_parser())]
+    bounce_order: Option<raypack::render::RayOrder>,
     /// Refuse scenes of more than N triangles and spheres (after triangulation and COLLADA
     /// instancing).
     #[arg(long, value_name = "N", long_help = MAX_PRIMITIVES_HELP)]
@@ -316,28 +290,12 @@ struct RenderArgs {
     tile: Option<String>,
 }
 
-/// `--shadow-order` / `--bounce-order`: [`raypack::render::RayOrder`].
-#[derive(Clone, Copy, Debug, ValueEnum)]
-enum RayOrderArg {
-    /// As shaded.
-    Queued,
-    /// By direction octant.
-    Octant,
-    /// By octant, then origin along a Morton curve.
-    OctantMorton,
-    /// By origin along a Morton curve.
-    Morton,
-}
-
-impl From<RayOrderArg> for raypack::render::RayOrder {
-    fn from(a: RayOrderArg) -> Self {
-        match a {
-            RayOrderArg::Queued => raypack::render::RayOrder::Queued,
-            RayOrderArg::Octant => raypack::render::RayOrder::Octant,
-            RayOrderArg::OctantMorton => raypack::render::RayOrder::OctantMorton,
-            RayOrderArg::Morton => raypack::render::RayOrder::Morton,
-        }
-    }
+/// `--shadow-order` / `--bounce-order`: the library's names ([`raypack::render::RayOrder::ALL`]).
+fn ray_order_parser() -> impl clap::builder::TypedValueParser<Value = raypack::render::RayOrder> {
+    use clap::builder::{PossibleValuesParser, TypedValueParser};
+    use raypack::render::RayOrder;
+    PossibleValuesParser::new(RayOrder::ALL.map(RayOrder::name))
+        .try_map(|name| RayOrder::ALL.into_iter().find(|o| o.name() == name).ok_or("not an order"))
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]

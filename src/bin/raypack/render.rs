@@ -12,14 +12,15 @@ use std::time::Instant;
 /// `raypack render`: checks the flags, the output paths and the memory, then renders.
 pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
     let window_flag = window_flag(&a);
-    let Some(integrator) = a.integrator.kind() else {
+    let integrator = a.integrator;
+    if integrator == render::IntegratorKind::Heatmap {
         if let Some(flag) = window_flag {
             return Err(CliError::Usage(format!(
                 "{flag} with --integrator heatmap: the heatmap renders whole images only"
             )));
         }
         return crate::heatmap::cmd_heatmap(a);
-    };
+    }
     check_ignored_flags(&a)?;
     let (width, height) = (a.resolution[0], a.resolution[1]);
     if width == 0 || height == 0 || width > 1 << 15 || height > 1 << 15 {
@@ -120,6 +121,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             hemisphere_sampling: a.hemisphere,
             adaptive,
             integrator,
+            heatmap: Default::default(),
             seed: a.seed,
             brute_force: a.brute_force,
             russian_roulette: !a.no_russian_roulette,
@@ -157,10 +159,10 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             scene.set_isa(isa).map_err(|e| CliError::Usage(e.to_string()))?;
         }
         if a.shadow_order.is_some() || a.bounce_order.is_some() {
-            let default = render::StreamOrder::default_for(scene.isa());
+            let default = render::StreamOrder::default();
             settings.stream_order = Some(render::StreamOrder {
-                shadow: a.shadow_order.map_or(default.shadow, Into::into),
-                bounce: a.bounce_order.map_or(default.bounce, Into::into),
+                shadow: a.shadow_order.unwrap_or(default.shadow),
+                bounce: a.bounce_order.unwrap_or(default.bounce),
             });
         }
         let aspect = width as f32 / height as f32;
