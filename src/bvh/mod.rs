@@ -20,6 +20,7 @@ pub mod frustum;
 pub mod limits;
 pub mod node;
 pub mod queries;
+mod stack;
 pub mod stats;
 pub mod traverse1;
 pub mod traverse_interleaved;

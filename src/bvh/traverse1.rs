@@ -38,17 +38,17 @@
 //! `C`, and `#[inline(always)]`: the entry points of [`crate::bvh::queries`] instantiate
 //! them per ISA tier, triangle test and counter.
 
-use crate::bvh::BVH8_STACK;
 use crate::bvh::bvh2::SLAB_WIDEN;
 use crate::bvh::bvh8::Bvh8Ref;
 use crate::bvh::counters::{Counter, Work};
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
+use crate::bvh::stack::{NearEntry, TraversalStack, stack_storage};
 use crate::geometry::sphere_block::sphere_lanes;
 use crate::geometry::{TriBlock, TriangleKernel};
 use crate::math::{SAFE_RECIP_TINY, Vec3};
 use crate::ray::{Hit, Ray};
 use crate::simd::{IsaLanes, Lanes, Vec3x};
-use std::mem::MaybeUninit;
+use std::borrow::{Borrow, BorrowMut};
 
 /// `crate::math::safe_recip` in every lane: magnitudes below `SAFE_RECIP_TINY` map to its
 /// reciprocal with the lane's sign. (Kernels use small functions, not closures: a closure is
@@ -288,15 +288,275 @@ fn descent_slot<I: IsaLanes, const SPECULATE: bool>(i: usize) -> usize {
     if SPECULATE && const { crate::bvh::tuning::speculate_descent(I::ISA) } { speculated_slot(i) } else { i }
 }
 
+/// What a single-ray query brings to the traversal skeleton ([`Bvh8Ref::walk1`]): the far
+/// bound of its node tests, the order it visits a node's hit children in (which slot it
+/// descends to, and what it pushes), what it does in a leaf, which stack entries it still
+/// wants, and its answer. The closest-hit ([`Closest`]) and any-hit ([`Any`]) queries
+/// implement it; [`Bvh8Ref::intersect1_from`], [`Bvh8Ref::occluded1_from`] and the
+/// interleaved kernels ([`crate::bvh::traverse_interleaved`]) instantiate the skeleton with
+/// them.
+pub(crate) trait SingleRayQuery<I: IsaLanes, T: TriBlock> {
+    /// A deferred subtree on the stack.
+    type Entry: Copy;
+    /// The answer for the ray.
+    type Out;
+    /// The ray's constants.
+    fn ray(&self) -> &Ray1<I::F8>;
+    /// The far end of the interval the node tests clip to.
+    fn node_tfar(&self) -> f32;
+    /// Of the hit children `mask` (not empty) of `node`, with entry distances `dist`, pushes
+    /// the ones visited later onto `stack` and returns the child to descend to. `SPECULATE`
+    /// and `IN_FLIGHT` as for [`Bvh8Ref::walk1`].
+    fn order<const SPECULATE: bool, const IN_FLIGHT: bool>(
+        &self,
+        bvh: &Bvh8Ref<'_, T>,
+        node: &Bvh8Node,
+        mask: u32,
+        dist: I::F8,
+        stack: &mut TraversalStack<'_, Self::Entry>,
+    ) -> NodeRef;
+    /// Tests the primitives of `leaf`; `Some` with the answer when the query is done.
+    fn leaf<C: Counter>(&mut self, bvh: &Bvh8Ref<'_, T>, leaf: NodeRef, counter: &mut C) -> Option<Self::Out>;
+    /// The next deferred subtree to visit, dropping the entries that can no longer matter;
+    /// `None` when none is left.
+    fn pop(&self, stack: &mut TraversalStack<'_, Self::Entry>) -> Option<NodeRef>;
+    /// The answer when the whole tree has been visited.
+    fn finish(&self) -> Self::Out;
+}
+
+/// The closest-hit query: its leaves shrink `tfar` and update the hit `H` (`&mut Hit` in the
+/// caller's memory, or a `Hit` of a ray in flight); hit children are visited nearest first
+/// and popped entries farther than the closest hit so far are skipped. `R` holds the ray's
+/// constants (a reference, or the constants of a ray in flight).
+pub(crate) struct Closest<I: IsaLanes, T: TriBlock, P: TriangleKernel, R, H> {
+    r: R,
+    pre: P::Ray1<T::Lanes<I>>,
+    tnear: T::Lanes<I>,
+    /// The closest hit's distance so far (the ray's `tfar` before any).
+    pub(crate) tfar: f32,
+    hit: H,
+}
+
+impl<I: IsaLanes, T: TriBlock, P: TriangleKernel, R: Borrow<Ray1<I::F8>>, H: BorrowMut<Hit>> Closest<I, T, P, R, H> {
+    /// The query of the ray `r`, searching `[r.ray.tnear, tfar]` with `hit` the closest hit
+    /// so far.
+    #[inline(always)]
+    pub(crate) fn new(r: R, tfar: f32, hit: H) -> Self {
+        let ray = &r.borrow().ray;
+        Self { pre: P::ray1::<T::Lanes<I>>(ray), tnear: T::Lanes::<I>::splat(ray.tnear), tfar, hit, r }
+    }
+}
+
+impl<I: IsaLanes, T: TriBlock, P: TriangleKernel, R: Borrow<Ray1<I::F8>>, H: BorrowMut<Hit>> SingleRayQuery<I, T>
+    for Closest<I, T, P, R, H>
+{
+    type Entry = NearEntry;
+    type Out = Hit;
+
+    #[inline(always)]
+    fn ray(&self) -> &Ray1<I::F8> {
+        self.r.borrow()
+    }
+
+    #[inline(always)]
+    fn node_tfar(&self) -> f32 {
+        self.tfar
+    }
+
+    /// With one hit child the traversal just descends, with two it pushes the farther one,
+    /// with more it pushes all but the nearest sorted by distance
+    /// ([`push_all_but_nearest`]). When two or more children will be visited they are all
+    /// prefetched, unless the tree is small enough to sit in the cache (`SPECULATE`).
+    #[inline(always)]
+    fn order<const SPECULATE: bool, const IN_FLIGHT: bool>(
+        &self,
+        bvh: &Bvh8Ref<'_, T>,
+        node: &Bvh8Node,
+        mut mask: u32,
+        dist: I::F8,
+        stack: &mut TraversalStack<'_, NearEntry>,
+    ) -> NodeRef {
+        let i0 = mask.trailing_zeros() as usize;
+        mask &= mask - 1;
+        if mask == 0 {
+            let next = next_child(node, descent_slot::<I, SPECULATE>(i0));
+            if IN_FLIGHT {
+                bvh.prefetch(next);
+            }
+            return next;
+        }
+        let mut d = [0.0f32; 8];
+        dist.store(&mut d);
+        if !SPECULATE {
+            bvh.prefetch_children(node, i0, mask);
+        }
+        let i1 = mask.trailing_zeros() as usize;
+        mask &= mask - 1;
+        let near = if mask == 0 {
+            let (near, far) = if d[i0] <= d[i1] { (i0, i1) } else { (i1, i0) };
+            stack.push(NearEntry { node: node.children[far], dist: d[far] });
+            near
+        } else {
+            push_all_but_nearest(node, i0, i1, mask, &d, stack)
+        };
+        next_child(node, descent_slot::<I, SPECULATE>(near))
+    }
+
+    #[inline(always)]
+    fn leaf<C: Counter>(&mut self, bvh: &Bvh8Ref<'_, T>, leaf: NodeRef, counter: &mut C) -> Option<Hit> {
+        let (r, hit) = (self.r.borrow(), self.hit.borrow_mut());
+        bvh.intersect_leaf1::<I, P, C>(leaf, r, &self.pre, self.tnear, &mut self.tfar, hit, counter);
+        None
+    }
+
+    #[inline(always)]
+    fn pop(&self, stack: &mut TraversalStack<'_, NearEntry>) -> Option<NodeRef> {
+        while let Some(e) = stack.pop() {
+            if e.dist <= self.tfar {
+                return Some(e.node);
+            }
+        }
+        None
+    }
+
+    #[inline(always)]
+    fn finish(&self) -> Hit {
+        *self.hit.borrow()
+    }
+}
+
+/// The any-hit query: the first primitive found on the ray's interval ends it. Hit children
+/// are visited from the highest slot down, without sorting: a node's leaves sit after its
+/// inner children ([`Bvh8Node`]), so its leaves are tested before the traversal descends into
+/// its subtrees, as the packet kernel does (`traverse_packet::LEAVES_FIRST`): a leaf costs a
+/// block test where a subtree costs a walk, and an occluder found there ends the query.
+pub(crate) struct Any<I: IsaLanes, T: TriBlock, P: TriangleKernel, R> {
+    r: R,
+    pre: P::Ray1<T::Lanes<I>>,
+    tnear: T::Lanes<I>,
+    tfar: T::Lanes<I>,
+}
+
+impl<I: IsaLanes, T: TriBlock, P: TriangleKernel, R: Borrow<Ray1<I::F8>>> Any<I, T, P, R> {
+    /// The query of the ray `r` over its interval.
+    #[inline(always)]
+    pub(crate) fn new(r: R) -> Self {
+        let ray = &r.borrow().ray;
+        let (tnear, tfar) = (T::Lanes::<I>::splat(ray.tnear), T::Lanes::<I>::splat(ray.tfar));
+        Self { pre: P::ray1::<T::Lanes<I>>(ray), tnear, tfar, r }
+    }
+}
+
+impl<I: IsaLanes, T: TriBlock, P: TriangleKernel, R: Borrow<Ray1<I::F8>>> SingleRayQuery<I, T> for Any<I, T, P, R> {
+    type Entry = NodeRef;
+    type Out = bool;
+
+    #[inline(always)]
+    fn ray(&self) -> &Ray1<I::F8> {
+        self.r.borrow()
+    }
+
+    #[inline(always)]
+    fn node_tfar(&self) -> f32 {
+        self.r.borrow().ray.tfar
+    }
+
+    #[inline(always)]
+    fn order<const SPECULATE: bool, const IN_FLIGHT: bool>(
+        &self,
+        bvh: &Bvh8Ref<'_, T>,
+        node: &Bvh8Node,
+        mask: u32,
+        _dist: I::F8,
+        stack: &mut TraversalStack<'_, NodeRef>,
+    ) -> NodeRef {
+        let first = push_below_highest(node, mask, stack);
+        let next = next_child(node, descent_slot::<I, SPECULATE>(first));
+        if IN_FLIGHT {
+            bvh.prefetch(next);
+        }
+        next
+    }
+
+    #[inline(always)]
+    fn leaf<C: Counter>(&mut self, bvh: &Bvh8Ref<'_, T>, leaf: NodeRef, counter: &mut C) -> Option<bool> {
+        let r = self.r.borrow();
+        if bvh.occluded_leaf1::<I, P, C>(leaf, r, &self.pre, self.tnear, self.tfar, counter) {
+            Some(true)
+        } else {
+            None
+        }
+    }
+
+    #[inline(always)]
+    fn pop(&self, stack: &mut TraversalStack<'_, NodeRef>) -> Option<NodeRef> {
+        stack.pop()
+    }
+
+    #[inline(always)]
+    fn finish(&self) -> bool {
+        false
+    }
+}
+
 impl<T: TriBlock> Bvh8Ref<'_, T> {
+    /// The single-ray traversal skeleton: query `q` from the subtree `cur` on. Each step is
+    /// an inner node's box test and the query's choice of the child to descend to, or a
+    /// leaf's test and the pops after it (or after a node none of whose children is hit).
+    /// Returns the answer when the ray is done; `IN_FLIGHT` returns `None` after each step
+    /// instead of going on, and prefetches the node or leaf the step ends on, for the ray's
+    /// next turn: the interleaved kernels take one step of each ray in flight in turn.
+    ///
+    /// `SPECULATE` takes each descent's slot through predicted branches (`speculated_slot`)
+    /// and skips the prefetches of hit children, which a tree this small holds in the cache.
+    #[inline(always)]
+    pub(crate) fn walk1<
+        I: IsaLanes,
+        Q: SingleRayQuery<I, T>,
+        C: Counter,
+        const SPECULATE: bool,
+        const IN_FLIGHT: bool,
+    >(
+        &self,
+        q: &mut Q,
+        cur: &mut NodeRef,
+        stack: &mut TraversalStack<'_, Q::Entry>,
+        counter: &mut C,
+    ) -> Option<Q::Out> {
+        loop {
+            if !cur.is_leaf() {
+                let node = &self.nodes[cur.node_index()];
+                counter.add(Work::Nodes, 1);
+                let (mask, dist) = q.ray().intersect_node(node, q.node_tfar());
+                if mask != 0 {
+                    *cur = q.order::<SPECULATE, IN_FLIGHT>(self, node, mask, dist, stack);
+                    if IN_FLIGHT {
+                        return None;
+                    }
+                    continue;
+                }
+            } else if let Some(out) = q.leaf(self, *cur, counter) {
+                return Some(out);
+            }
+            match q.pop(stack) {
+                Some(next) => {
+                    *cur = next;
+                    if IN_FLIGHT {
+                        self.prefetch(next);
+                        return None;
+                    }
+                }
+                None => return Some(q.finish()),
+            }
+        }
+    }
+
     /// Closest-hit traversal of the subtree `start` in ISA `I` with triangle kernel `P`
     /// (which must be the kernel of `self.test`), shrinking `tfar` and updating `hit` as
     /// closer hits are found; the packet kernels' single-ray fallback enters here too.
     /// Sphere hits carry `u = v = 0`; the scene fills in their surface coordinates.
     ///
-    /// `SPECULATE` takes each descent's slot through predicted branches (`speculated_slot`)
-    /// and skips the prefetches of hit children, which a tree this small holds in the cache.
-    /// The single-ray query sets it in small trees
+    /// `SPECULATE` as for [`Bvh8Ref::walk1`]. The single-ray query sets it in small trees
     /// ([`crate::bvh::queries::SPECULATION_MAX_BYTES`]); the packet kernels' fallback does
     /// not: its rays enter subtrees part-way down, one after the other, where the branch
     /// history does not tell the slot, and the streams were slower with it (PERFORMANCE.md,
@@ -312,126 +572,43 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
         counter: &mut C,
     ) {
         debug_assert_eq!(P::TEST, self.test, "kernel of the block layout");
-        let mut refs = [const { MaybeUninit::<NodeRef>::uninit() }; BVH8_STACK];
-        let mut dists = [const { MaybeUninit::<f32>::uninit() }; BVH8_STACK];
-        let mut sp = 0usize;
-        let pre = P::ray1::<T::Lanes<I>>(&r.ray);
-        let tnear = T::Lanes::<I>::splat(r.ray.tnear);
         // The closest hit so far stays in the caller's memory (`black_box` hides where the
         // reference points, so the compiler cannot keep its fields in registers): a hit writes
         // it, and the block test, which needs every vector register, no longer saves and
         // restores `t`, `u` and `v` around each block. `tfar` stays in a register: in memory
         // too it saved instructions but cost wall clock (PERFORMANCE.md, "Spills of the
         // single-ray kernel").
-        let mut tfar = *tfar_io;
-        let hit = std::hint::black_box(hit_io);
+        let mut q = Closest::<I, T, P, _, _>::new(r, *tfar_io, std::hint::black_box(hit_io));
+        let mut items = stack_storage();
+        let mut stack = TraversalStack::new(&mut items);
         let mut cur = start;
-        loop {
-            'descend: {
-                while !cur.is_leaf() {
-                    let node = &self.nodes[cur.node_index()];
-                    counter.add(Work::Nodes, 1);
-                    let (mut mask, dist) = r.intersect_node(node, tfar);
-                    if mask == 0 {
-                        break 'descend;
-                    }
-                    let i0 = mask.trailing_zeros() as usize;
-                    mask &= mask - 1;
-                    if mask == 0 {
-                        cur = next_child(node, descent_slot::<I, SPECULATE>(i0));
-                        continue;
-                    }
-                    let mut d = [0.0f32; 8];
-                    dist.store(&mut d);
-                    // Two or more children will be visited: start fetching all of them now,
-                    // unless the tree is small enough to sit in the cache (`SPECULATE`).
-                    if !SPECULATE {
-                        let mut m = mask;
-                        while m != 0 {
-                            let i = m.trailing_zeros() as usize;
-                            m &= m - 1;
-                            self.prefetch(node.children[i]);
-                        }
-                        self.prefetch(node.children[i0]);
-                    }
-                    let i1 = mask.trailing_zeros() as usize;
-                    mask &= mask - 1;
-                    if mask == 0 {
-                        let (near, far) = if d[i0] <= d[i1] { (i0, i1) } else { (i1, i0) };
-                        refs[sp] = MaybeUninit::new(node.children[far]);
-                        dists[sp] = MaybeUninit::new(d[far]);
-                        sp += 1;
-                        cur = next_child(node, descent_slot::<I, SPECULATE>(near));
-                        continue;
-                    }
-                    // Three or more: continue with the nearest (of equal distances the last
-                    // slot, where a stable sort by decreasing distance would put it on top),
-                    // push the others and sort the pushed run by decreasing distance
-                    // (insertion sort).
-                    let rest = mask;
-                    let mut near = if d[i1] <= d[i0] { i1 } else { i0 };
-                    let mut m = rest;
-                    while m != 0 {
-                        let i = m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        if d[i] <= d[near] {
-                            near = i;
-                        }
-                    }
-                    let base = sp;
-                    let mut m = (rest | 1 << i0 | 1 << i1) & !(1 << near);
-                    while m != 0 {
-                        let i = m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        refs[sp] = MaybeUninit::new(node.children[i]);
-                        dists[sp] = MaybeUninit::new(d[i]);
-                        sp += 1;
-                    }
-                    for i in base + 1..sp {
-                        // SAFETY: entries base..sp were written just above.
-                        let (rr, dd) = unsafe { (refs[i].assume_init(), dists[i].assume_init()) };
-                        let mut j = i;
-                        // SAFETY: base <= j - 1 < sp, written above.
-                        while j > base && unsafe { dists[j - 1].assume_init() } < dd {
-                            refs[j] = refs[j - 1];
-                            dists[j] = dists[j - 1];
-                            j -= 1;
-                        }
-                        refs[j] = MaybeUninit::new(rr);
-                        dists[j] = MaybeUninit::new(dd);
-                    }
-                    cur = next_child(node, descent_slot::<I, SPECULATE>(near));
-                }
-                self.intersect_leaf1::<I, P, C>(cur, r, &pre, tnear, &mut tfar, hit, counter);
-            }
-            loop {
-                if sp == 0 {
-                    *tfar_io = tfar;
-                    return;
-                }
-                sp -= 1;
-                // SAFETY: entries below sp were written by pushes.
-                let (next, d) = unsafe { (refs[sp].assume_init(), dists[sp].assume_init()) };
-                if d <= tfar {
-                    cur = next;
-                    break;
-                }
-            }
-        }
+        self.walk1::<I, _, C, SPECULATE, false>(&mut q, &mut cur, &mut stack, counter);
+        *tfar_io = q.tfar;
     }
 
-    // The helpers below (`prefetch_children`, `occluded_leaf1`, `push_all_but_nearest`,
-    // `push_below_highest`) are the steps of `intersect1_from` and `occluded1_from` that the
-    // interleaved kernels (`crate::bvh::traverse_interleaved`) share. The two fused kernels keep
-    // their own inline copies: with them calling these helpers (the same code once inlined), a
-    // crate depending on raypack, built with cargo's default profile, traced slower on the
-    // baseline tier, by their code layout, not their work (PERFORMANCE.md, "Incoherent rays
-    // in large trees: several in flight").
+    /// Any-hit traversal of the subtree `start` in ISA `I` with triangle kernel `P` (which
+    /// must be the kernel of `self.test`), in [`Any`]'s order (a node's leaves before its
+    /// subtrees). `SPECULATE` as for [`Bvh8Ref::walk1`].
+    #[inline(always)]
+    pub fn occluded1_from<I: IsaLanes, P: TriangleKernel, C: Counter, const SPECULATE: bool>(
+        &self,
+        r: &Ray1<I::F8>,
+        start: NodeRef,
+        counter: &mut C,
+    ) -> bool {
+        debug_assert_eq!(P::TEST, self.test, "kernel of the block layout");
+        let mut q = Any::<I, T, P, _>::new(r);
+        let mut items = stack_storage();
+        let mut stack = TraversalStack::new(&mut items);
+        let mut cur = start;
+        // Without `IN_FLIGHT` the walk returns only with the answer.
+        self.walk1::<I, _, C, SPECULATE, false>(&mut q, &mut cur, &mut stack, counter).unwrap_or(false)
+    }
 
     /// Prefetches the children of `node` in the slots set in `rest` (from the lowest up), then
     /// the one in slot `i0`.
     #[inline(always)]
-    pub(crate) fn prefetch_children(&self, node: &Bvh8Node, i0: usize, rest: u32) {
+    fn prefetch_children(&self, node: &Bvh8Node, i0: usize, rest: u32) {
         let mut m = rest;
         while m != 0 {
             let i = m.trailing_zeros() as usize;
@@ -444,7 +621,7 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
     /// The closest hit in `leaf` nearer than `tfar` (which it shrinks), into `hit`.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    pub(crate) fn intersect_leaf1<I: IsaLanes, P: TriangleKernel, C: Counter>(
+    fn intersect_leaf1<I: IsaLanes, P: TriangleKernel, C: Counter>(
         &self,
         leaf: NodeRef,
         r: &Ray1<I::F8>,
@@ -494,78 +671,6 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
         }
     }
 
-    /// Any-hit traversal of the subtree `start` in ISA `I` with triangle kernel `P` (which
-    /// must be the kernel of `self.test`). Hit children are visited from the highest slot
-    /// down, without sorting: a node's leaves sit after its inner children
-    /// ([`Bvh8Node`]), so its leaves are tested before the traversal descends into its
-    /// subtrees, as the packet kernel does (`traverse_packet::LEAVES_FIRST`): a leaf costs a
-    /// block test where a subtree costs a walk, and an occluder found there ends the query.
-    /// `SPECULATE` as for [`Bvh8Ref::intersect1_from`].
-    #[inline(always)]
-    pub fn occluded1_from<I: IsaLanes, P: TriangleKernel, C: Counter, const SPECULATE: bool>(
-        &self,
-        r: &Ray1<I::F8>,
-        start: NodeRef,
-        counter: &mut C,
-    ) -> bool {
-        debug_assert_eq!(P::TEST, self.test, "kernel of the block layout");
-        let mut stack = [const { MaybeUninit::<NodeRef>::uninit() }; BVH8_STACK];
-        let mut sp = 0usize;
-        let pre = P::ray1::<T::Lanes<I>>(&r.ray);
-        let (tnear, tfar) = (T::Lanes::<I>::splat(r.ray.tnear), T::Lanes::<I>::splat(r.ray.tfar));
-        let mut cur = start;
-        loop {
-            'descend: {
-                while !cur.is_leaf() {
-                    let node = &self.nodes[cur.node_index()];
-                    counter.add(Work::Nodes, 1);
-                    let (mut mask, _) = r.intersect_node(node, r.ray.tfar);
-                    if mask == 0 {
-                        break 'descend;
-                    }
-                    // The highest slot now; the others pushed from the lowest up, so that
-                    // they pop from the highest down.
-                    let first = 31 - mask.leading_zeros() as usize;
-                    mask &= !(1 << first);
-                    while mask != 0 {
-                        let i = mask.trailing_zeros() as usize;
-                        mask &= mask - 1;
-                        stack[sp] = MaybeUninit::new(node.children[i]);
-                        sp += 1;
-                    }
-                    cur = next_child(node, descent_slot::<I, SPECULATE>(first));
-                }
-                let range = cur.blocks();
-                counter.add(Work::Leaves, 1);
-                match cur.kind() {
-                    LeafKind::Triangles => {
-                        for block in &self.tris[range] {
-                            counter.add(Work::Blocks, 1);
-                            if P::block(block, &pre, tnear, tfar).mask != 0 {
-                                return true;
-                            }
-                        }
-                    }
-                    LeafKind::Spheres => {
-                        for block in &self.spheres[range] {
-                            counter.add(Work::Blocks, 1);
-                            let (m, _) = block.intersect1::<I::F4>(r.ray.origin, r.ray.dir, r.ray.tnear, r.ray.tfar);
-                            if m != 0 {
-                                return true;
-                            }
-                        }
-                    }
-                }
-            }
-            if sp == 0 {
-                return false;
-            }
-            sp -= 1;
-            // SAFETY: entries below sp were written by pushes.
-            cur = unsafe { stack[sp].assume_init() };
-        }
-    }
-
     /// True when something in `leaf` blocks the ray `r` over `[tnear, tfar]` (`pre`, `tnear`,
     /// `tfar`: the triangle test's constants of `r` and its interval, in lanes).
     #[inline(always)]
@@ -603,23 +708,19 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
     }
 }
 
-/// The closest-hit kernels' order when three or more children of `node` are hit (`i0` and
-/// `i1`, the lowest two hit slots, and the others in `rest`, not empty; entry distances `d`):
-/// returns the nearest slot, to descend to (of equal distances the last slot, where a stable
-/// sort by decreasing distance would put it on top), and pushes the others onto `refs` /
-/// `dists` above `sp`, sorted by decreasing distance (insertion sort), so that the nearest
-/// pops first.
-#[allow(clippy::too_many_arguments)]
+/// The closest-hit order when three or more children of `node` are hit (`i0` and `i1`, the
+/// lowest two hit slots, and the others in `rest`, not empty; entry distances `d`): returns
+/// the nearest slot, to descend to (of equal distances the last slot, where a stable sort by
+/// decreasing distance would put it on top), and pushes the others onto `stack` sorted by
+/// decreasing distance, so that the nearest pops first.
 #[inline(always)]
-pub(crate) fn push_all_but_nearest(
+fn push_all_but_nearest(
     node: &Bvh8Node,
     i0: usize,
     i1: usize,
     rest: u32,
     d: &[f32; 8],
-    refs: &mut [MaybeUninit<NodeRef>; BVH8_STACK],
-    dists: &mut [MaybeUninit<f32>; BVH8_STACK],
-    sp: &mut usize,
+    stack: &mut TraversalStack<'_, NearEntry>,
 ) -> usize {
     let mut near = if d[i1] <= d[i0] { i1 } else { i0 };
     let mut m = rest;
@@ -630,49 +731,28 @@ pub(crate) fn push_all_but_nearest(
             near = i;
         }
     }
-    let base = *sp;
+    let base = stack.len();
     let mut m = (rest | 1 << i0 | 1 << i1) & !(1 << near);
     while m != 0 {
         let i = m.trailing_zeros() as usize;
         m &= m - 1;
-        refs[*sp] = MaybeUninit::new(node.children[i]);
-        dists[*sp] = MaybeUninit::new(d[i]);
-        *sp += 1;
+        stack.push(NearEntry { node: node.children[i], dist: d[i] });
     }
-    for i in base + 1..*sp {
-        // SAFETY: entries base..sp were written just above.
-        let (rr, dd) = unsafe { (refs[i].assume_init(), dists[i].assume_init()) };
-        let mut j = i;
-        // SAFETY: base <= j - 1 < sp, written above.
-        while j > base && unsafe { dists[j - 1].assume_init() } < dd {
-            refs[j] = refs[j - 1];
-            dists[j] = dists[j - 1];
-            j -= 1;
-        }
-        refs[j] = MaybeUninit::new(rr);
-        dists[j] = MaybeUninit::new(dd);
-    }
+    stack.sort_from_by_decreasing_distance(base);
     near
 }
 
-/// The any-hit kernels' order: of the hit children `mask` (not empty) of `node`, returns the
-/// highest slot (the one to descend to) and pushes the others onto `stack` above `sp` from
-/// the lowest up, so that they pop from the highest down: a node's leaves (its last slots)
-/// before its subtrees.
+/// The any-hit order: of the hit children `mask` (not empty) of `node`, returns the highest
+/// slot (the one to descend to) and pushes the others onto `stack` from the lowest up, so
+/// that they pop from the highest down: a node's leaves (its last slots) before its subtrees.
 #[inline(always)]
-pub(crate) fn push_below_highest(
-    node: &Bvh8Node,
-    mut mask: u32,
-    stack: &mut [MaybeUninit<NodeRef>; BVH8_STACK],
-    sp: &mut usize,
-) -> usize {
+fn push_below_highest(node: &Bvh8Node, mut mask: u32, stack: &mut TraversalStack<'_, NodeRef>) -> usize {
     let first = 31 - mask.leading_zeros() as usize;
     mask &= !(1 << first);
     while mask != 0 {
         let i = mask.trailing_zeros() as usize;
         mask &= mask - 1;
-        stack[*sp] = MaybeUninit::new(node.children[i]);
-        *sp += 1;
+        stack.push(node.children[i]);
     }
     first
 }

@@ -20,151 +20,43 @@
 
 use crate::bvh::BVH8_STACK;
 use crate::bvh::bvh8::Bvh8Ref;
-use crate::bvh::counters::{Counter, Work};
+use crate::bvh::counters::Counter;
 use crate::bvh::node::NodeRef;
-use crate::bvh::traverse1::{Ray1, next_child, push_all_but_nearest, push_below_highest};
+use crate::bvh::stack::{TraversalStack, stack_storage};
+use crate::bvh::traverse1::{Any, Closest, Ray1, SingleRayQuery};
 use crate::geometry::{TriBlock, TriangleKernel};
 use crate::ray::{Hit, Ray};
-use crate::simd::{IsaLanes, Lanes};
-use std::mem::MaybeUninit;
+use crate::simd::IsaLanes;
 
 /// Rays in flight at once. Stanford dragon and 2M knot diffuse rays, AVX2, 1 thread: 2 and 4
 /// were slower than 8, 16 no faster (PERFORMANCE.md).
 pub const FLIGHTS: usize = 8;
 
-/// One ray's traversal stack: child references and (closest hit) their entry distances.
-struct Stack {
-    refs: [MaybeUninit<NodeRef>; BVH8_STACK],
-    dists: [MaybeUninit<f32>; BVH8_STACK],
-}
-
-/// A query whose rays can be stepped: its per-ray state, its step and its answer.
-trait Flight<I: IsaLanes, T: TriBlock, P: TriangleKernel>: Sized {
-    /// The answer for one ray.
-    type Out: Copy;
+/// A single-ray query whose rays can be in flight: the skeleton's query
+/// ([`SingleRayQuery`]) holding its ray's constants and answer itself.
+trait Flight<I: IsaLanes, T: TriBlock>: SingleRayQuery<I, T, Out: Copy> {
     /// The answer for a ray that is not valid ([`Ray::is_valid`]).
     const INVALID: Self::Out;
-    /// The state of `ray` (valid) before its first step, at the root.
-    fn start(bvh: &Bvh8Ref<'_, T>, ray: &Ray) -> Self;
-    /// Visits the ray's current node, or its current leaf and the pops after it; ends with a
-    /// prefetch of the next one. `Some` when the ray is done.
-    fn step<C: Counter>(&mut self, bvh: &Bvh8Ref<'_, T>, stack: &mut Stack, counter: &mut C) -> Option<Self::Out>;
+    /// The query of `ray` (valid) before its first step.
+    fn start(ray: &Ray) -> Self;
 }
 
-/// Closest hit of one ray in flight.
-struct Closest<I: IsaLanes, T: TriBlock, P: TriangleKernel> {
-    r: Ray1<I::F8>,
-    pre: P::Ray1<T::Lanes<I>>,
-    tfar: f32,
-    hit: Hit,
-    cur: NodeRef,
-    sp: usize,
-}
-
-impl<I: IsaLanes, T: TriBlock, P: TriangleKernel> Flight<I, T, P> for Closest<I, T, P> {
-    type Out = Hit;
+impl<I: IsaLanes, T: TriBlock, P: TriangleKernel> Flight<I, T> for Closest<I, T, P, Ray1<I::F8>, Hit> {
     const INVALID: Hit = Hit::MISS;
 
     #[inline(always)]
-    fn start(bvh: &Bvh8Ref<'_, T>, ray: &Ray) -> Self {
+    fn start(ray: &Ray) -> Self {
         let r = Ray1::new(ray);
-        Self { tfar: r.ray.tfar, r, pre: P::ray1(ray), hit: Hit::MISS, cur: bvh.root(), sp: 0 }
-    }
-
-    #[inline(always)]
-    fn step<C: Counter>(&mut self, bvh: &Bvh8Ref<'_, T>, s: &mut Stack, counter: &mut C) -> Option<Hit> {
-        let cur = self.cur;
-        if !cur.is_leaf() {
-            let node = &bvh.nodes[cur.node_index()];
-            counter.add(Work::Nodes, 1);
-            let (mut mask, dist) = self.r.intersect_node(node, self.tfar);
-            if mask != 0 {
-                let i0 = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                if mask == 0 {
-                    self.cur = next_child(node, i0);
-                    bvh.prefetch(self.cur);
-                    return None;
-                }
-                let mut d = [0.0f32; 8];
-                dist.store(&mut d);
-                bvh.prefetch_children(node, i0, mask);
-                let i1 = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                let near = if mask == 0 {
-                    let (near, far) = if d[i0] <= d[i1] { (i0, i1) } else { (i1, i0) };
-                    s.refs[self.sp] = MaybeUninit::new(node.children[far]);
-                    s.dists[self.sp] = MaybeUninit::new(d[far]);
-                    self.sp += 1;
-                    near
-                } else {
-                    push_all_but_nearest(node, i0, i1, mask, &d, &mut s.refs, &mut s.dists, &mut self.sp)
-                };
-                self.cur = next_child(node, near);
-                return None;
-            }
-        } else {
-            let tnear = T::Lanes::<I>::splat(self.r.ray.tnear);
-            bvh.intersect_leaf1::<I, P, C>(cur, &self.r, &self.pre, tnear, &mut self.tfar, &mut self.hit, counter);
-        }
-        while self.sp > 0 {
-            self.sp -= 1;
-            // SAFETY: entries below sp were written by pushes.
-            let (next, d) = unsafe { (s.refs[self.sp].assume_init(), s.dists[self.sp].assume_init()) };
-            if d <= self.tfar {
-                self.cur = next;
-                bvh.prefetch(next);
-                return None;
-            }
-        }
-        Some(self.hit)
+        Closest::new(r, r.ray.tfar, Hit::MISS)
     }
 }
 
-/// Any hit of one ray in flight.
-struct Any<I: IsaLanes, T: TriBlock, P: TriangleKernel> {
-    r: Ray1<I::F8>,
-    pre: P::Ray1<T::Lanes<I>>,
-    cur: NodeRef,
-    sp: usize,
-}
-
-impl<I: IsaLanes, T: TriBlock, P: TriangleKernel> Flight<I, T, P> for Any<I, T, P> {
-    type Out = bool;
+impl<I: IsaLanes, T: TriBlock, P: TriangleKernel> Flight<I, T> for Any<I, T, P, Ray1<I::F8>> {
     const INVALID: bool = false;
 
     #[inline(always)]
-    fn start(bvh: &Bvh8Ref<'_, T>, ray: &Ray) -> Self {
-        Self { r: Ray1::new(ray), pre: P::ray1(ray), cur: bvh.root(), sp: 0 }
-    }
-
-    #[inline(always)]
-    fn step<C: Counter>(&mut self, bvh: &Bvh8Ref<'_, T>, s: &mut Stack, counter: &mut C) -> Option<bool> {
-        let cur = self.cur;
-        if !cur.is_leaf() {
-            let node = &bvh.nodes[cur.node_index()];
-            counter.add(Work::Nodes, 1);
-            let (mask, _) = self.r.intersect_node(node, self.r.ray.tfar);
-            if mask != 0 {
-                let first = push_below_highest(node, mask, &mut s.refs, &mut self.sp);
-                self.cur = next_child(node, first);
-                bvh.prefetch(self.cur);
-                return None;
-            }
-        } else {
-            let (tnear, tfar) = (T::Lanes::<I>::splat(self.r.ray.tnear), T::Lanes::<I>::splat(self.r.ray.tfar));
-            if bvh.occluded_leaf1::<I, P, C>(cur, &self.r, &self.pre, tnear, tfar, counter) {
-                return Some(true);
-            }
-        }
-        if self.sp == 0 {
-            return Some(false);
-        }
-        self.sp -= 1;
-        // SAFETY: entries below sp were written by pushes.
-        self.cur = unsafe { s.refs[self.sp].assume_init() };
-        bvh.prefetch(self.cur);
-        None
+    fn start(ray: &Ray) -> Self {
+        Any::new(Ray1::new(ray))
     }
 }
 
@@ -180,7 +72,7 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
         hits: &mut [Hit],
         counter: &mut C,
     ) {
-        self.interleave::<I, P, C, Closest<I, T, P>>(rays, ids, hits, counter);
+        self.interleave::<I, P, C, Closest<I, T, P, Ray1<I::F8>, Hit>>(rays, ids, hits, counter);
     }
 
     /// Whether anything blocks the rays `rays[i]` for `i` in `ids`, into `occluded[i]`,
@@ -194,13 +86,13 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
         occluded: &mut [bool],
         counter: &mut C,
     ) {
-        self.interleave::<I, P, C, Any<I, T, P>>(rays, ids, occluded, counter);
+        self.interleave::<I, P, C, Any<I, T, P, Ray1<I::F8>>>(rays, ids, occluded, counter);
     }
 
     /// The driver: starts a ray in every free flight, steps the flights in turn, and writes
     /// each ray's answer when it is done.
     #[inline(always)]
-    fn interleave<I: IsaLanes, P: TriangleKernel, C: Counter, F: Flight<I, T, P>>(
+    fn interleave<I: IsaLanes, P: TriangleKernel, C: Counter, F: Flight<I, T>>(
         &self,
         rays: &[Ray],
         mut ids: impl Iterator<Item = usize>,
@@ -208,10 +100,10 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
         counter: &mut C,
     ) {
         debug_assert_eq!(P::TEST, self.test, "kernel of the block layout");
-        let mut flights: [Option<(F, usize)>; FLIGHTS] = [const { None }; FLIGHTS];
-        let mut stacks =
-            [const { Stack { refs: [MaybeUninit::uninit(); BVH8_STACK], dists: [MaybeUninit::uninit(); BVH8_STACK] } };
-                FLIGHTS];
+        // Each flight: its query, its current node or leaf, and its ray's index.
+        let mut flights: [Option<(F, NodeRef, usize)>; FLIGHTS] = [const { None }; FLIGHTS];
+        let mut items = [const { stack_storage::<F::Entry, BVH8_STACK>() }; FLIGHTS];
+        let mut stacks = items.each_mut().map(TraversalStack::new);
         // The next valid ray, answering the invalid ones on the way.
         let mut next_ray = |out: &mut [F::Out]| {
             for i in ids.by_ref() {
@@ -225,7 +117,7 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
         let mut live = 0u32;
         for (g, f) in flights.iter_mut().enumerate() {
             if let Some(i) = next_ray(out) {
-                *f = Some((F::start(self, &rays[i]), i));
+                *f = Some((F::start(&rays[i]), self.root(), i));
                 live |= 1 << g;
             }
         }
@@ -234,13 +126,16 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
             while m != 0 {
                 let g = m.trailing_zeros() as usize;
                 m &= m - 1;
-                let Some((f, i)) = &mut flights[g] else { continue };
-                if let Some(answer) = f.step(self, &mut stacks[g], counter) {
+                let Some((f, cur, i)) = &mut flights[g] else { continue };
+                if let Some(answer) = self.walk1::<I, F, C, false, true>(f, cur, &mut stacks[g], counter) {
                     out[*i] = answer;
                     match next_ray(out) {
                         Some(j) => {
-                            *f = F::start(self, &rays[j]);
+                            *f = F::start(&rays[j]);
+                            *cur = self.root();
                             *i = j;
+                            // An any-hit query ends at its first hit, with entries left.
+                            stacks[g].clear();
                         }
                         None => {
                             flights[g] = None;
