@@ -411,6 +411,10 @@ impl<I: IsaLanes, T: TriBlock, P: TriangleKernel, R: Borrow<Ray1<I::F8>>, H: Bor
 
     #[inline(always)]
     fn pop(&self, stack: &mut TraversalStack<'_, NearEntry>) -> Option<NodeRef> {
+        // The empty stack first, the end of every ray: the loop's set-up is for the others.
+        if stack.len() == 0 {
+            return None;
+        }
         while let Some(e) = stack.pop() {
             if e.dist <= self.tfar {
                 return Some(e.node);
