@@ -5,15 +5,14 @@
 //! down the whole tree ([`Bvh8Ref::frustum_may_hit`]), which the renderer uses to skip pixels
 //! that cannot hit anything.
 
-use crate::bvh::BVH8_STACK;
 use crate::bvh::bvh2::SLAB_WIDEN;
 use crate::bvh::bvh8::Bvh8Ref;
 use crate::bvh::node::Bvh8Node;
 use crate::bvh::node::{LeafKind, NodeRef};
+use crate::bvh::stack::{TraversalStack, stack_storage};
 use crate::geometry::{TriBlock, TriangleTest};
 use crate::math::Vec3;
 use crate::simd::{IsaLanes, Lanes, Vec3x};
-use std::mem::MaybeUninit;
 
 /// The interval bounds of a packet of rays whose direction signs agree on every axis, in
 /// lanes `V` of 8 (one per child slot of a node).
@@ -186,8 +185,8 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
     /// sphere leaf's box) meets the frustum, or `budget` inner nodes were visited without
     /// deciding. Depth first, stopping at the first such box.
     pub fn frustum_may_hit<I: IsaLanes>(&self, f: &Frustum<I::F8>, mut budget: usize) -> bool {
-        let mut stack = [const { MaybeUninit::<NodeRef>::uninit() }; BVH8_STACK];
-        let mut sp = 0;
+        let mut items = stack_storage();
+        let mut stack = TraversalStack::<NodeRef>::new(&mut items);
         let mut cur = self.root();
         loop {
             if !cur.is_leaf() {
@@ -198,8 +197,7 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                 let node = &self.nodes[cur.node_index()];
                 let (mut mask, _) = f.intersect_node(node);
                 while mask != 0 {
-                    stack[sp] = MaybeUninit::new(node.children[mask.trailing_zeros() as usize]);
-                    sp += 1;
+                    stack.push(node.children[mask.trailing_zeros() as usize]);
                     mask &= mask - 1;
                 }
             } else if cur.kind() == LeafKind::Spheres {
@@ -212,12 +210,10 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                     }
                 }
             }
-            if sp == 0 {
-                return false;
+            match stack.pop() {
+                Some(next) => cur = next,
+                None => return false,
             }
-            sp -= 1;
-            // SAFETY: entries below `sp` were written by the pushes above.
-            cur = unsafe { stack[sp].assume_init() };
         }
     }
 }
