@@ -1,9 +1,13 @@
-// Not split: the closest-hit and any-hit single-ray kernels share the node test and stack, with their unit tests.
+// Not split: the node test, the one single-ray skeleton and its two queries inline into each other, with their unit tests.
 //! Single-ray traversal of the 8-wide BVH: one ray against the eight child boxes of a node
 //! per step, closest hit (`intersect1`) and any hit (`occluded1`).
 //!
-//! (One file past 600 lines with its unit tests: the two kernels, the node test and the
-//! descent and push steps they and the interleaved kernels share, which inline into each other.)
+//! One skeleton (`Bvh8Ref::walk1`) walks the tree for every single-ray kernel: the fused
+//! closest-hit and any-hit kernels below and the interleaved ones
+//! ([`crate::bvh::traverse_interleaved`]). The query it is instantiated with
+//! (`SingleRayQuery`: `Closest` or `Any`) supplies the order of a node's hit children, the
+//! leaf test and which stack entries still matter, as Embree's and pbrt-v4's traversal loops
+//! are one loop with the query's parts plugged in.
 //!
 //! The node test is Embree's (Wald et al., "Embree: A Kernel Framework for Efficient CPU Ray
 //! Tracing", 2014; for 8 lanes Fuetterling et al., "Accelerated Single Ray Tracing for Wide
@@ -560,7 +564,9 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
     /// closer hits are found; the packet kernels' single-ray fallback enters here too.
     /// Sphere hits carry `u = v = 0`; the scene fills in their surface coordinates.
     ///
-    /// `SPECULATE` as for [`Bvh8Ref::walk1`]. The single-ray query sets it in small trees
+    /// `SPECULATE` takes each descent's slot through predicted branches (`speculated_slot`)
+    /// and skips the prefetches of hit children, which a tree this small holds in the cache.
+    /// The single-ray query sets it in small trees
     /// ([`crate::bvh::queries::SPECULATION_MAX_BYTES`]); the packet kernels' fallback does
     /// not: its rays enter subtrees part-way down, one after the other, where the branch
     /// history does not tell the slot, and the streams were slower with it (PERFORMANCE.md,
@@ -591,8 +597,9 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
     }
 
     /// Any-hit traversal of the subtree `start` in ISA `I` with triangle kernel `P` (which
-    /// must be the kernel of `self.test`), in [`Any`]'s order (a node's leaves before its
-    /// subtrees). `SPECULATE` as for [`Bvh8Ref::walk1`].
+    /// must be the kernel of `self.test`), visiting a node's hit children from the highest
+    /// slot down (its leaves before its subtrees). `SPECULATE` as for
+    /// [`Bvh8Ref::intersect1_from`].
     #[inline(always)]
     pub fn occluded1_from<I: IsaLanes, P: TriangleKernel, C: Counter, const SPECULATE: bool>(
         &self,

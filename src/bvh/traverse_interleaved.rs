@@ -8,9 +8,9 @@
 //! each advanced by one step (a node, or a leaf and the pops after it) in turn, and every
 //! step ends by prefetching what its ray visits next: by the time the ray's turn comes again,
 //! the other rays' steps have covered the miss, and several misses are outstanding at once
-//! instead of one. Each ray's traversal is the single-ray kernels' own, step for step (the
-//! same node test, order of children, leaf tests and pops, [`crate::bvh::traverse1`]), so the
-//! hits are those of [`crate::Scene::intersect1`] and [`crate::Scene::occluded1`] exactly.
+//! instead of one. Each ray's traversal is the single-ray kernels' own: the same skeleton
+//! and queries ([`crate::bvh::traverse1`]) taking one step per turn, so the hits are those of
+//! [`crate::Scene::intersect1`] and [`crate::Scene::occluded1`] exactly.
 //!
 //! Where the tree fits the caches the prefetches cover nothing and the switching costs: each
 //! step starts from its ray's state in memory, and the branch predictor sees the rays'
