@@ -147,3 +147,52 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::bvh::TraversalCounts;
+    use crate::generate::random_soup;
+    use crate::rng::Rng;
+    use crate::{BuildOptions, Isa, Material, Ray, SceneBuilder, Vec3};
+
+    /// The interleaved kernels take each ray through the single-ray kernels' steps, whatever
+    /// the other flights do: the same answers and the same work (nodes, leaves, blocks) as
+    /// the single-ray queries ray by ray, on every ISA tier. Short segments make many any-hit
+    /// queries end at a hit with entries left on their stack, which the flight's next ray
+    /// must not pop.
+    #[test]
+    fn interleaved_kernels_take_the_single_ray_kernels_steps() {
+        let mesh = random_soup(3000, 0.2, 5);
+        let mut b = SceneBuilder::new();
+        let m = b.add_material(Material::default());
+        b.add_mesh(&mesh.positions, &mesh.indices, m).unwrap();
+        b.add_sphere(Vec3::new(0.5, 0.5, 0.5), 0.3, m).unwrap();
+        let (scene, _) = b.commit(&BuildOptions::default());
+        let bvh = scene.bvh8();
+        let mut rng = Rng::new(8, 2);
+        let mut r3 = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 - 1.0;
+        let mut rays: Vec<Ray> = (0..4000)
+            .map(|i| Ray::segment(r3() * 1.5, r3(), 0.0, if i % 2 == 0 { 0.3 } else { f32::INFINITY }))
+            .collect();
+        rays[7] = Ray { tnear: f32::NAN, ..rays[7] }; // not valid: misses, not blocked
+        for isa in Isa::available() {
+            let (mut single, mut flights) = (TraversalCounts::default(), TraversalCounts::default());
+            let mut blocked = vec![true; rays.len()];
+            bvh.occluded_interleaved_with(isa, &rays, &mut blocked, &mut flights);
+            let want: Vec<bool> = rays.iter().map(|r| bvh.occluded1_with(isa, r, &mut single)).collect();
+            assert_eq!(blocked, want, "{isa}");
+            assert_eq!(flights, single, "{isa}: occlusion work");
+            let blocked_count = want.iter().filter(|&&b| b).count();
+            assert!(blocked_count > rays.len() / 8 && blocked_count < rays.len() / 2, "{isa}: {blocked_count}");
+
+            let (mut single, mut flights) = (TraversalCounts::default(), TraversalCounts::default());
+            let mut hits = vec![crate::Hit::MISS; rays.len()];
+            bvh.intersect_interleaved_with(isa, &rays, &mut hits, &mut flights);
+            for (i, r) in rays.iter().enumerate() {
+                let want = bvh.intersect1_with(isa, r, &mut single);
+                assert_eq!((hits[i].t.to_bits(), hits[i].prim), (want.t.to_bits(), want.prim), "{isa} ray {i}");
+            }
+            assert_eq!(flights, single, "{isa}: closest-hit work");
+        }
+    }
+}
