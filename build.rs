@@ -1,5 +1,5 @@
 //! Build script: with cargo feature `embree`, finds Embree 3 or 4, compiles the C shim in
-//! `tests/embree/` against it and links it. Without the feature it does nothing.
+//! `src/embree/` against it and links it. Without the feature it does nothing.
 //!
 //! Where Embree is looked for, first found wins:
 //! 1. `RAYPACK_EMBREE_DIR`: an install prefix (Intel's release archives, a CMake install)
@@ -32,7 +32,7 @@ fn git_commit() {
         return;
     };
     // Only the files that go into the binaries count: an edited README does not make it dirty.
-    let built_from = ["src", "build.rs", "Cargo.toml", "Cargo.lock", "scenes", "tests/embree"];
+    let built_from = ["src", "build.rs", "Cargo.toml", "Cargo.lock", "scenes"];
     let status = git(&[&["status", "--porcelain", "--untracked-files=no", "--"][..], &built_from].concat());
     let dirty = if status.is_some_and(|s| !s.is_empty()) { "-dirty" } else { "" };
     println!("cargo:rustc-env=RAYPACK_GIT_COMMIT={commit}{dirty}");
@@ -62,8 +62,8 @@ mod embree {
     }
 
     pub fn build() {
-        println!("cargo:rerun-if-changed=tests/embree/shim.c");
-        println!("cargo:rerun-if-changed=tests/embree/shim.h");
+        println!("cargo:rerun-if-changed=src/embree/shim.c");
+        println!("cargo:rerun-if-changed=src/embree/shim.h");
         println!("cargo:rerun-if-env-changed=RAYPACK_EMBREE_DIR");
         println!("cargo:rerun-if-env-changed=RAYPACK_EMBREE_VERSION");
         let majors: Vec<u32> = match std::env::var("RAYPACK_EMBREE_VERSION").ok().as_deref() {
@@ -83,7 +83,7 @@ mod embree {
         };
         println!("cargo:rustc-env=RAYPACK_EMBREE_FOUND=Embree {} ({})", found.major, found.how);
         let mut cc = cc::Build::new();
-        cc.file("tests/embree/shim.c")
+        cc.file("src/embree/shim.c")
             .std("gnu11")
             .opt_level(2)
             .warnings(true)

@@ -77,7 +77,7 @@ pub mod system;
 #[cfg(test)]
 mod testing;
 
-pub use bvh::{BuildOptions, BuildQuality, Bvh8Node, BvhStats, SplitMethod, TraversalCounts};
+pub use bvh::{BuildOptions, BuildQuality, BuildQualityError, Bvh8Node, BvhStats, SplitMethod, TraversalCounts};
 pub use math::{Aabb, Mat3, Mat4, Vec3};
 pub use ray::{Hit, Ray, RayPacket, RayPacket8, RayPacket16};
 pub use scene::{

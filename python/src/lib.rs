@@ -90,12 +90,7 @@ impl PoolCache {
 }
 
 fn parse_quality(q: &str) -> PyResult<BuildQuality> {
-    match q {
-        "fast" => Ok(BuildQuality::Fast),
-        "medium" => Ok(BuildQuality::Medium),
-        "high" => Ok(BuildQuality::High),
-        _ => Err(PyValueError::new_err(format!("quality: expected 'fast', 'medium' or 'high', got '{q}'"))),
-    }
+    q.parse().map_err(|e| PyValueError::new_err(format!("quality: {e}")))
 }
 
 fn parse_integrator(name: &str) -> PyResult<IntegratorKind> {

@@ -29,7 +29,10 @@ pub mod tuning;
 pub mod validate;
 
 pub use array::BvhArray;
-pub use build::{BuildOptions, BuildPrim, BuildQuality, SplitMethod, build_bvh2, build_bvh2_kinds, build_bvh2_spatial};
+pub use build::{
+    BuildOptions, BuildPrim, BuildQuality, BuildQualityError, SplitMethod, build_bvh2, build_bvh2_kinds,
+    build_bvh2_spatial,
+};
 pub use bvh2::{Bvh2, Bvh2Node};
 pub use bvh8::{Bvh8, Bvh8Stats, DefaultTriBlock};
 pub use collapse::{CollapseMethod, CollapseOptions, PrimShape, collapse, collapse_for};

@@ -11,9 +11,9 @@ scene=${1:?usage: run.sh SCENE [ROUNDS] [ISA ...]}
 rounds=${2:-3}
 shift $(( $# >= 2 ? 2 : 1 ))
 isas=("$@")
-(cd "$here/../.." && env -u RUSTFLAGS cargo build --release -q --example dependent_kernels)
+(cd "$here/../.." && env -u RUSTFLAGS cargo build --release -q --features tools --bin dependent_kernels)
 (cd "$here" && env -u RUSTFLAGS -u CARGO_ENCODED_RUSTFLAGS cargo build --release -q)
-own="$here/../../target/release/examples/dependent_kernels"
+own="$here/../../target/release/dependent_kernels"
 dep="$here/target/release/dependent-check"
 if [ ${#isas[@]} -eq 0 ]; then
   isas=($("$own" --list-isas))

@@ -15,7 +15,7 @@ use crate::{BenchArgs, CliError, check_memory, load, print_warnings};
 use raypack::methods::embree_methods;
 use raypack::methods::{Method, output_for, raypack_methods_named, trace};
 use raypack::raysets::{self, Checksum};
-use raypack::{BuildOptions, BuildQuality, SceneBuilder};
+use raypack::{BuildOptions, SceneBuilder};
 use raypack::{Isa, Scene};
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -974,12 +974,12 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     let mut trees = Vec::new();
     let mut tree_opts = Vec::new();
     for (k, &q) in a.qualities().iter().enumerate() {
-        let quality: BuildQuality = q.into();
+        let quality = q;
         // The first tree's binary BVH stays for the reference rows and the checksums they
         // anchor.
         let opts = BuildOptions { quality, watertight: a.watertight, keep_bvh2: k == 0, ..BuildOptions::default() };
         let (scene, build) = build_timed(&builder, &opts, &a)?;
-        let name = format!("{quality:?}").to_lowercase();
+        let name = quality.name().to_string();
         trees.push(RaypackTree { quality: name, scene, build });
         tree_opts.push(opts);
     }
@@ -1011,7 +1011,7 @@ mod tests {
     use super::*;
     use raypack::generate::uv_sphere;
     use raypack::kernels::KERNELS;
-    use raypack::{BuildOptions, Material, SceneBuilder};
+    use raypack::{BuildOptions, BuildQuality, Material, SceneBuilder};
 
     /// A UV sphere of 16 × 24 quads, committed with `opts`.
     fn sphere_scene(opts: &BuildOptions) -> Scene {

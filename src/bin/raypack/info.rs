@@ -271,10 +271,6 @@ fn embree_builds(_: &TrianglesSoa, _: usize, _: Option<Isa>) -> Result<Vec<Embre
     Ok(Vec::new())
 }
 
-fn quality_name(q: BuildQuality) -> String {
-    format!("{q:?}").to_lowercase()
-}
-
 fn mb(bytes: usize) -> String {
     format!("{:.1} MB", bytes as f64 / 1e6)
 }
@@ -314,7 +310,7 @@ impl SceneInfo {
         let _ = writeln!(s, "isa          {} (the CPU's best: {})", self.isa, Isa::detected());
         for bi in &self.builds {
             let how = if bi.from_cache { "loaded from the BVH cache" } else { "built" };
-            let _ = writeln!(s, "{:<12} {:.4} s, {how}", format!("build {}", quality_name(bi.quality)), bi.seconds);
+            let _ = writeln!(s, "{:<12} {:.4} s, {how}", format!("build {}", bi.quality.name()), bi.seconds);
             match &bi.bvh2 {
                 Some(b) => {
                     let _ = writeln!(s, "  bvh2       {b}");
@@ -387,7 +383,7 @@ impl SceneInfo {
             .iter()
             .map(|bi| {
                 json!({
-                    "quality": quality_name(bi.quality),
+                    "quality": bi.quality.name(),
                     "seconds": bi.seconds,
                     "from_cache": bi.from_cache,
                     "cache_warnings": bi.cache_warnings,
@@ -459,7 +455,7 @@ pub(crate) fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
         ..InfoOptions::default()
     };
     if let Some(q) = a.quality {
-        opts.qualities = vec![q.into()];
+        opts.qualities = vec![q];
     }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.unwrap_or(0))

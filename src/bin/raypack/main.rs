@@ -129,8 +129,8 @@ struct BenchArgs {
     /// raypack's BVH build efforts, comma-separated (e.g. `medium,high`): each tree's methods
     /// are timed, named with their quality in brackets when there are several. Default:
     /// medium; with `--against embree`, medium and high, as Embree's MEDIUM and HIGH.
-    #[arg(long, value_enum, value_delimiter = ',')]
-    quality: Vec<QualityArg>,
+    #[arg(long, value_parser = quality_parser(), value_delimiter = ',')]
+    quality: Vec<BuildQuality>,
     /// Load the BVH from (or save it to) a cache file in this directory.
     #[arg(long, value_name = "DIR")]
     bvh_cache: Option<PathBuf>,
@@ -250,8 +250,8 @@ struct RenderArgs {
     #[arg(long)]
     brute_force: bool,
     /// BVH build effort.
-    #[arg(long, value_enum, default_value_t = QualityArg::Medium)]
-    quality: QualityArg,
+    #[arg(long, value_parser = quality_parser(), default_value_t = BuildQuality::Medium)]
+    quality: BuildQuality,
     /// Load the BVH from (or save it to) a cache file in this directory.
     #[arg(long, value_name = "DIR")]
     bvh_cache: Option<PathBuf>,
@@ -298,32 +298,11 @@ fn ray_order_parser() -> impl clap::builder::TypedValueParser<Value = raypack::r
         .try_map(|name| RayOrder::ALL.into_iter().find(|o| o.name() == name).ok_or("not an order"))
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-enum QualityArg {
-    Fast,
-    Medium,
-    High,
-}
-
-impl QualityArg {
-    /// The name `--quality` takes.
-    fn name(self) -> &'static str {
-        match self {
-            QualityArg::Fast => "fast",
-            QualityArg::Medium => "medium",
-            QualityArg::High => "high",
-        }
-    }
-}
-
-impl From<QualityArg> for BuildQuality {
-    fn from(q: QualityArg) -> Self {
-        match q {
-            QualityArg::Fast => BuildQuality::Fast,
-            QualityArg::Medium => BuildQuality::Medium,
-            QualityArg::High => BuildQuality::High,
-        }
-    }
+/// `--quality`'s parser: the library's names ([`BuildQuality::name`]), listed in `--help`.
+fn quality_parser() -> impl clap::builder::TypedValueParser<Value = BuildQuality> {
+    use clap::builder::TypedValueParser as _;
+    clap::builder::PossibleValuesParser::new(BuildQuality::ALL.map(BuildQuality::name))
+        .try_map(|s| s.parse::<BuildQuality>())
 }
 
 #[derive(Args)]
@@ -337,8 +316,8 @@ struct InfoArgs {
     #[arg(long)]
     validate: bool,
     /// Only this build quality (default: fast, medium and high).
-    #[arg(long, value_enum)]
-    quality: Option<QualityArg>,
+    #[arg(long, value_parser = quality_parser())]
+    quality: Option<BuildQuality>,
     /// Load the BVHs from (or save them to) cache files in this directory.
     #[arg(long, value_name = "DIR")]
     bvh_cache: Option<PathBuf>,
@@ -379,12 +358,12 @@ impl BenchArgs {
 
     /// The qualities of `--quality`, repeats dropped; by default medium, and high as well
     /// against Embree, whose MEDIUM and HIGH trees are both timed.
-    fn qualities(&self) -> Vec<QualityArg> {
+    fn qualities(&self) -> Vec<BuildQuality> {
         let mut q = self.quality.clone();
         if q.is_empty() {
-            q.push(QualityArg::Medium);
+            q.push(BuildQuality::Medium);
             if self.against.is_some() {
-                q.push(QualityArg::High);
+                q.push(BuildQuality::High);
             }
         }
         let mut out = Vec::with_capacity(q.len());

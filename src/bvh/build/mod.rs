@@ -33,6 +33,47 @@ pub enum BuildQuality {
     High,
 }
 
+impl BuildQuality {
+    /// Every effort, least first.
+    pub const ALL: [BuildQuality; 3] = [BuildQuality::Fast, BuildQuality::Medium, BuildQuality::High];
+
+    /// Short name: `fast`, `medium`, `high` (what [`BuildQuality::parse`] takes).
+    pub fn name(self) -> &'static str {
+        match self {
+            BuildQuality::Fast => "fast",
+            BuildQuality::Medium => "medium",
+            BuildQuality::High => "high",
+        }
+    }
+
+    /// Parses `fast`, `medium` or `high` (any case, surrounding spaces ignored).
+    pub fn parse(s: &str) -> Result<BuildQuality, BuildQualityError> {
+        let t = s.trim();
+        BuildQuality::ALL
+            .into_iter()
+            .find(|q| q.name().eq_ignore_ascii_case(t))
+            .ok_or_else(|| BuildQualityError(s.to_string()))
+    }
+}
+
+/// A build quality name that is not `fast`, `medium` or `high`.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("expected 'fast', 'medium' or 'high', got '{0}'")]
+pub struct BuildQualityError(pub String);
+
+impl std::str::FromStr for BuildQuality {
+    type Err = BuildQualityError;
+    fn from_str(s: &str) -> Result<BuildQuality, BuildQualityError> {
+        BuildQuality::parse(s)
+    }
+}
+
+impl std::fmt::Display for BuildQuality {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// The splitting rule.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum SplitMethod {
@@ -267,4 +308,20 @@ pub fn pad_outward(b: &Aabb) -> Aabb {
     let scale = b.min.abs().max(b.max.abs()).max(b.extent()).max_element() * BOUNDS_PADDING;
     let scale = scale.max(f32::MIN_POSITIVE);
     Aabb { min: b.min - Vec3::splat(scale), max: b.max + Vec3::splat(scale) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::BuildQuality;
+
+    #[test]
+    fn quality_names_parse_back() {
+        for q in BuildQuality::ALL {
+            assert_eq!(q.name().parse::<BuildQuality>(), Ok(q));
+            assert_eq!(q.name().to_uppercase().parse::<BuildQuality>(), Ok(q));
+            assert_eq!(q.to_string(), q.name());
+        }
+        let err = "ultra".parse::<BuildQuality>().unwrap_err();
+        assert_eq!(err.to_string(), "expected 'fast', 'medium' or 'high', got 'ultra'");
+    }
 }

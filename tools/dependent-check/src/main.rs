@@ -5,7 +5,7 @@
 // Usage: dependent-check SCENE [--isa sse|avx2|avx512] [--runs N] [-r W H]
 //        dependent-check --list-isas
 //
-// The project builds the same source as `examples/dependent_kernels.rs` (which includes this
+// The project builds the same source as `tools/bin/dependent_kernels.rs` (which includes this
 // file), so `run.sh` compares one program under two builds.
 
 use raypack::kernels::{Results, simd_kernels};

@@ -3,7 +3,7 @@
 //! how many pixels are the same bit for bit.
 //! Two renders of one scene with different seeds give the renderer's noise (RMSE = √2 σ).
 //!
-//! `cargo run --release --example image_rmse -- a.exr b.exr`
+//! `cargo run --release --features tools --bin image_rmse -- a.exr b.exr`
 
 use exr::prelude::{ReadChannels, ReadLayers, read};
 use std::process::ExitCode;

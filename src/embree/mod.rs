@@ -3,7 +3,7 @@
 //! Embree: `RAYPACK_EMBREE_DIR`, pkg-config, the system headers). [`EMBREE_FOUND`] names the
 //! one this build links; [`EmbreeScene::version`] the library loaded at run time.
 //!
-//! The C side is `tests/embree/shim.c`: one Embree device and scene per [`EmbreeScene`],
+//! The C side is `src/embree/shim.c`: one Embree device and scene per [`EmbreeScene`],
 //! holding one triangle mesh whose primitive ids are raypack's triangle ids. Rays and hits
 //! cross the boundary as raypack's own [`Ray`] and [`Hit`] arrays (their layouts are asserted
 //! below); the packet calls gather consecutive rays into Embree's 8- or 16-wide SoA packets,

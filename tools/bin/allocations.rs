@@ -2,7 +2,7 @@
 //! not using an arena (`bumpalo`) for the builder's temporaries or per-tile render buffers.
 //!
 //! ```sh
-//! cargo run --release --example allocations -- SCENE [WIDTH HEIGHT SPP]
+//! cargo run --release --features tools --bin allocations -- SCENE [WIDTH HEIGHT SPP]
 //! ```
 //!
 //! Prints, for the commit (medium quality) and for a render of the scene's camera, the wall

@@ -2,7 +2,7 @@
 //! load) costs against building it: the measurement behind verifying every cache file.
 //!
 //! ```sh
-//! cargo run --release --example verify_cost -- SCENE [QUALITY] [ROUNDS]
+//! cargo run --release --features tools --bin verify_cost -- SCENE [QUALITY] [ROUNDS]
 //! ```
 //!
 //! Builds the scene (fast, medium or high; default medium) and verifies the result, ROUNDS

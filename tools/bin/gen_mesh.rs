@@ -2,7 +2,7 @@
 //! knot, closed, with `2 * n_len * n_around` triangles close to the requested count.
 //!
 //! ```sh
-//! cargo run --release --example gen_mesh -- 5000000 /tmp/knot-5m.ply
+//! cargo run --release --features tools --bin gen_mesh -- 5000000 /tmp/knot-5m.ply
 //! ```
 //! (`tools/gen-mesh` wraps this and generates the 1M, 5M and 20M set.)
 

@@ -3,11 +3,11 @@
 //! comparison of the two triangle tests that the shared machine's noisy clocks cannot give:
 //!
 //! ```sh
-//! cargo build --release --example triangle_test_cost
+//! cargo build --release --features tools --bin triangle_test_cost
 //! for w in "" --watertight; do
 //!   valgrind --tool=callgrind --callgrind-out-file=/tmp/cg$w.out --collect-atstart=no \
 //!     --toggle-collect='*trace_single*' --toggle-collect='*trace_packets*' \
-//!     target/release/examples/triangle_test_cost SCENE 512 384 $w
+//!     target/release/triangle_test_cost SCENE 512 384 $w
 //!   callgrind_annotate --inclusive=yes /tmp/cg$w.out | grep trace_
 //! done
 //! ```
