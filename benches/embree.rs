@@ -5,7 +5,7 @@
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use raypack::embree::{EmbreeQuality, EmbreeScene};
 use raypack::generate::{Mesh, random_soup, torus_knot};
-use raypack::methods::{Output, embree_methods, output_for, raypack_methods, trace};
+use raypack::kernels::{Results, embree_methods, raypack_methods, trace};
 use raypack::raysets::bench_sets;
 use raypack::{BuildOptions, Material, Scene, SceneBuilder, Vec3};
 
@@ -31,12 +31,12 @@ fn bench(c: &mut Criterion) {
             let mut group = c.benchmark_group(format!("embree/{name}/{}", set.kind.name()));
             group.throughput(Throughput::Elements(set.rays.len() as u64)).sample_size(10);
             let reference = &methods[0];
-            let mut ref_out = output_for(&reference.run, set.rays.len());
+            let mut ref_out = Results::for_run(&reference.run, set.rays.len());
             trace(&reference.run, &set.rays, &mut ref_out);
             for m in methods.iter().filter(|m| m.run.is_occlusion() == set.kind.is_occlusion()) {
                 // Validate once before timing: hit counts agree with the reference within
                 // the edge cases the cross-check test allows.
-                let mut out = output_for(&m.run, set.rays.len());
+                let mut out = Results::for_run(&m.run, set.rays.len());
                 pool.install(|| trace(&m.run, &set.rays, &mut out));
                 let (a, b) = (out.checksum(&set.rays).hits, ref_out_checksum(&ref_out, &set.rays, &m.run, scene));
                 assert!(a.abs_diff(b) as f64 <= 1e-3 * set.rays.len() as f64 + 1.0, "{} {}: {a} vs {b}", name, m.name);
@@ -50,7 +50,7 @@ fn bench(c: &mut Criterion) {
 }
 
 /// The reference's hit count for the query `run` answers.
-fn ref_out_checksum(ref_out: &Output, rays: &[raypack::Ray], run: &raypack::methods::Run<'_>, scene: &Scene) -> u64 {
+fn ref_out_checksum(ref_out: &Results, rays: &[raypack::Ray], run: &raypack::kernels::Run<'_>, scene: &Scene) -> u64 {
     if run.is_occlusion() {
         rays.iter().filter(|r| scene.occluded1_reference(r)).count() as u64
     } else {

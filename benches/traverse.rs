@@ -11,7 +11,7 @@
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use raypack::bvh::{BuildPrim, Bvh8, CollapseOptions, build_bvh2, collapse};
 use raypack::generate::{Mesh, grid, random_soup, torus_knot, uv_sphere};
-use raypack::methods::{output_for, raypack_methods, trace};
+use raypack::kernels::{Results, raypack_methods, trace};
 use raypack::raysets::bench_sets;
 use raypack::{BuildOptions, Material, Scene, SceneBuilder, Vec3};
 
@@ -73,11 +73,11 @@ fn traverse(c: &mut Criterion) {
             let mut group = c.benchmark_group(format!("traverse/{name}/{}", set.kind.name()));
             group.throughput(Throughput::Elements(set.rays.len() as u64)).sample_size(10);
             let reference = methods.iter().find(|m| m.run.is_occlusion() == occlusion).expect("reference kernel");
-            let mut want = output_for(&reference.run, set.rays.len());
+            let mut want = Results::for_run(&reference.run, set.rays.len());
             trace(&reference.run, &set.rays, &mut want);
             let want = want.checksum(&set.rays);
             for m in methods.iter().filter(|m| m.run.is_occlusion() == occlusion) {
-                let mut out = output_for(&m.run, set.rays.len());
+                let mut out = Results::for_run(&m.run, set.rays.len());
                 pool.install(|| trace(&m.run, &set.rays, &mut out));
                 let got = out.checksum(&set.rays);
                 assert_eq!((got.hits, got.t_sum.to_bits()), (want.hits, want.t_sum.to_bits()), "{name} {}", m.name);

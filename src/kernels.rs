@@ -1,10 +1,15 @@
-//! The registry of raypack's ray queries: every kernel a user can call, by name, in one
-//! table ([`KERNELS`]) that the benchmarks time, the kernel tests check against the scalar
-//! reference and the Embree cross-check compares hit for hit.
+//! The registry of ray queries: every raypack kernel a user can call, by name, in one table
+//! ([`KERNELS`]) that the benchmarks time, the kernel tests check against the scalar
+//! reference and the Embree cross-check compares hit for hit; and the same kernels, and
+//! Embree's calls, bound to their scene as [`Method`]s, traced over all threads by [`trace`].
 //!
-//! Each SIMD kernel runs on every ISA tier the CPU has: set the scene's tier with
-//! [`Scene::set_isa`] (the tiers to try are [`Isa::available`]) and call [`Kernel::run`].
-//! Every kernel has the same contract: a slice of [`Ray`]s in, one result per ray out.
+//! Every kernel and method has one contract: a slice of [`Ray`]s in, one result per ray out
+//! ([`Results`]). Each SIMD kernel runs on every ISA tier the CPU has: set the scene's tier
+//! with [`Scene::set_isa`] (the tiers to try are [`Isa::available`]) and call [`Kernel::run`].
+//! Rays are spread over threads in contiguous chunks of whole 4×4 tiles
+//! ([`crate::scene::STREAM_CHUNK`] rays, [`crate::scene::par_for_each_chunk`]). `raypack
+//! bench`, the benchmarks and the Embree cross-check all trace through this module, so they
+//! time and compare the same calls.
 //!
 //! ```
 //! use raypack::kernels::{KERNELS, Results};
@@ -26,8 +31,10 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+use crate::bvh::{NoCount, StreamKernel};
 use crate::ray::{Hit, Ray, RayPacket8, RayPacket16};
-use crate::scene::Scene;
+use crate::raysets::Checksum;
+use crate::scene::{Scene, StreamOptions, par_for_each_chunk};
 #[cfg(doc)]
 use crate::simd::Isa;
 
@@ -75,7 +82,7 @@ impl Kernel {
     }
 }
 
-/// The results of one kernel on a ray set.
+/// The results of one kernel or method on a ray set.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Results {
     /// Closest hits.
@@ -90,6 +97,22 @@ impl Results {
         match kernel.query {
             Query::Intersect(_) => Results::Hits(vec![Hit::MISS; n]),
             Query::Occluded(_) => Results::Occluded(vec![false; n]),
+        }
+    }
+
+    /// A buffer of `n` results of `run`'s query.
+    pub fn for_run(run: &Run<'_>, n: usize) -> Results {
+        match run {
+            Run::Intersect(_) => Results::Hits(vec![Hit::MISS; n]),
+            Run::Occluded(_) => Results::Occluded(vec![false; n]),
+        }
+    }
+
+    /// The checksum of these results for `rays`.
+    pub fn checksum(&self, rays: &[Ray]) -> Checksum {
+        match self {
+            Results::Hits(h) => Checksum::of_hits(h),
+            Results::Occluded(o) => Checksum::of_occlusion(rays, o),
         }
     }
 
@@ -153,26 +176,31 @@ macro_rules! packet_kernels {
 packet_kernels!(intersect8, occluded8, RayPacket8, 8);
 packet_kernels!(intersect16, occluded16, RayPacket16, 16);
 
+/// The registry's streams: on the calling thread (the registry's runs spread the rays
+/// over threads themselves, [`trace`]).
+const CALLER: StreamOptions = StreamOptions::CALLER;
+
 fn intersect_stream(scene: &Scene, rays: &[Ray], hits: &mut [Hit]) {
-    scene.intersect_batch(rays, hits);
+    scene.intersect_stream(rays, hits, &CALLER);
 }
 
 fn intersect_interleaved(scene: &Scene, rays: &[Ray], hits: &mut [Hit]) {
-    scene.intersect_interleaved(rays, hits);
+    scene.intersect_stream(rays, hits, &CALLER.with_kernel(StreamKernel::Interleaved));
 }
 
 fn occluded_interleaved(scene: &Scene, rays: &[Ray], out: &mut [bool]) {
-    scene.occluded_interleaved(rays, out);
+    scene.occluded_stream(rays, out, &CALLER.with_kernel(StreamKernel::Interleaved));
 }
 
 fn occluded_stream(scene: &Scene, rays: &[Ray], out: &mut [bool]) {
-    scene.occluded_batch(rays, out);
+    scene.occluded_stream(rays, out, &CALLER);
 }
 
 /// Every ray query of [`Scene`], one line per kernel, the scalar references first. Packet
 /// kernels receive consecutive rays (4 x 4 pixel tiles for camera rays); the stream kernels
-/// are what [`Scene::intersect_stream`] and [`Scene::occluded_stream`] run on each thread's
-/// share of the rays.
+/// are [`Scene::intersect_stream`] and [`Scene::occluded_stream`] on the calling thread, by
+/// default ([`StreamKernel::Auto`]) and with every ray interleaved
+/// ([`StreamKernel::Interleaved`], the rows named `_interleaved`).
 pub const KERNELS: &[Kernel] = &[
     Kernel { name: "bvh2 reference intersect1", query: Query::Intersect(reference_intersect1), simd: false },
     Kernel { name: "bvh2 reference occluded1", query: Query::Occluded(reference_occluded1), simd: false },
@@ -191,4 +219,93 @@ pub const KERNELS: &[Kernel] = &[
 /// The SIMD kernels of [`KERNELS`] (those that run on the scene's ISA).
 pub fn simd_kernels() -> impl Iterator<Item = &'static Kernel> {
     KERNELS.iter().filter(|k| k.simd)
+}
+
+/// A traceable method of either tracer, bound to its scene.
+pub struct Method<'a> {
+    /// `raypack` or `embree`.
+    pub tracer: &'static str,
+    /// Method name, e.g. `rtcIntersect16 coherent (high)`.
+    pub name: String,
+    /// What it runs.
+    pub run: Run<'a>,
+}
+
+/// A closest-hit function bound to its scene: one hit per ray.
+pub type IntersectRays<'a> = Box<dyn Fn(&[Ray], &mut [Hit]) + Sync + 'a>;
+/// An occlusion function bound to its scene: one flag per ray.
+pub type OccludedRays<'a> = Box<dyn Fn(&[Ray], &mut [bool]) + Sync + 'a>;
+
+/// A bound closest-hit or occlusion function.
+pub enum Run<'a> {
+    /// Closest hit of each ray.
+    Intersect(IntersectRays<'a>),
+    /// Occlusion of each ray.
+    Occluded(OccludedRays<'a>),
+}
+
+impl Run<'_> {
+    /// True for occlusion queries.
+    pub fn is_occlusion(&self) -> bool {
+        matches!(self, Run::Occluded(_))
+    }
+}
+
+/// The kernels of [`KERNELS`] bound to `scene` (on its ISA).
+pub fn raypack_methods(scene: &Scene) -> Vec<Method<'_>> {
+    raypack_methods_named(scene, "", true)
+}
+
+/// [`raypack_methods`] with `suffix` (e.g. ` (high)`) appended to every name; without
+/// `reference`, the SIMD kernels only (the scalar reference is the same whatever the BVH8).
+pub fn raypack_methods_named<'a>(scene: &'a Scene, suffix: &str, reference: bool) -> Vec<Method<'a>> {
+    KERNELS
+        .iter()
+        .filter(|k| reference || k.simd)
+        .map(|k| Method {
+            tracer: "raypack",
+            name: format!("{}{suffix}", k.name),
+            run: match k.query {
+                Query::Intersect(f) => Run::Intersect(Box::new(move |r, h| f(scene, r, h))),
+                Query::Occluded(f) => Run::Occluded(Box::new(move |r, o| f(scene, r, o))),
+            },
+        })
+        .collect()
+}
+
+/// Embree's calls on `e`: `rtcIntersect1/8/16`, `rtcOccluded1/8/16`, and the 8- and 16-wide
+/// packet calls again with `RTC_INTERSECT_CONTEXT_FLAG_COHERENT`. `suffix` (e.g. ` (high)`)
+/// is appended to every name.
+#[cfg(feature = "embree")]
+pub fn embree_methods<'a>(e: &'a crate::embree::EmbreeScene, suffix: &str) -> Vec<Method<'a>> {
+    use crate::embree::EmbreeWidth::{W1, W8, W16};
+    let mut out = Vec::new();
+    for (width, coherent) in [(W1, false), (W8, false), (W16, false), (W8, true), (W16, true)] {
+        let tag = if coherent { " coherent" } else { "" };
+        let lanes = width.lanes();
+        out.push(Method {
+            tracer: "embree",
+            name: format!("rtcIntersect{lanes}{tag}{suffix}"),
+            run: Run::Intersect(Box::new(move |r, h| e.intersect(width, coherent, r, h))),
+        });
+        out.push(Method {
+            tracer: "embree",
+            name: format!("rtcOccluded{lanes}{tag}{suffix}"),
+            run: Run::Occluded(Box::new(move |r, o| e.occluded(width, coherent, r, o))),
+        });
+    }
+    out
+}
+
+/// Traces `rays` with `run` into `out` on the current rayon pool, in the stream queries'
+/// chunks ([`par_for_each_chunk`]).
+///
+/// # Panics
+/// When `out` is of the other query kind or shorter than `rays`.
+pub fn trace(run: &Run<'_>, rays: &[Ray], out: &mut Results) {
+    match (run, out) {
+        (Run::Intersect(f), Results::Hits(h)) => par_for_each_chunk(rays, h, &mut NoCount, |r, h, _| f(r, h)),
+        (Run::Occluded(f), Results::Occluded(o)) => par_for_each_chunk(rays, o, &mut NoCount, |r, o, _| f(r, o)),
+        _ => panic!("output buffer does not match the query"),
+    }
 }

@@ -41,7 +41,7 @@
 //! ([`Scene::intersect1_reference`]); invalid rays ([`Ray::is_valid`]) miss.
 //!
 //! ```
-//! use raypack::{BuildOptions, Hit, Material, Ray, SceneBuilder, Vec3};
+//! use raypack::{BuildOptions, Hit, Material, Ray, SceneBuilder, StreamOptions, Vec3};
 //!
 //! let mut b = SceneBuilder::new();
 //! let mat = b.add_material(Material::default());
@@ -49,7 +49,7 @@
 //! let (scene, _) = b.commit(&BuildOptions::default());
 //! let rays: Vec<Ray> = (0..64).map(|i| Ray::new(Vec3::new(0.0, i as f32 * 0.05 - 1.6, 5.0), -Vec3::Z)).collect();
 //! let mut hits = vec![Hit::MISS; rays.len()];
-//! scene.intersect_stream(&rays, &mut hits);
+//! scene.intersect_stream(&rays, &mut hits, &StreamOptions::POOL);
 //! for (r, h) in rays.iter().zip(&hits) {
 //!     assert_eq!(h.t, scene.intersect1_reference(r).t);
 //! }
@@ -66,7 +66,6 @@ pub mod geometry;
 pub mod io;
 pub mod kernels;
 pub mod math;
-pub mod methods;
 pub mod ray;
 pub mod raysets;
 pub mod render;
@@ -77,11 +76,13 @@ pub mod system;
 #[cfg(test)]
 mod testing;
 
-pub use bvh::{BuildOptions, BuildQuality, BuildQualityError, Bvh8Node, BvhStats, SplitMethod, TraversalCounts};
+pub use bvh::{
+    BuildOptions, BuildQuality, BuildQualityError, Bvh8Node, BvhStats, SplitMethod, StreamKernel, TraversalCounts,
+};
 pub use math::{Aabb, Mat3, Mat4, Vec3};
 pub use ray::{Hit, Ray, RayPacket, RayPacket8, RayPacket16};
 pub use scene::{
     Bsdf, CacheError, CacheReport, Camera, CommitReport, Light, Material, MaterialId, Scene, SceneBuilder, SceneError,
-    SurfaceHit,
+    StreamOptions, SurfaceHit, Threads,
 };
 pub use simd::{Isa, IsaError};

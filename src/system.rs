@@ -265,3 +265,35 @@ mod tests {
         }
     }
 }
+
+/// Most threads a thread count may ask for, per logical CPU: more only costs thread starts
+/// and gains nothing (a huge count stalls a render for seconds before its first pixel).
+pub const THREADS_PER_CPU: usize = 8;
+
+/// A thread count above [`max_threads`] (or zero).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("expected 1 to {max} threads ({THREADS_PER_CPU} per logical CPU; this machine has {cpus})")]
+pub struct ThreadsError {
+    /// The count asked for.
+    pub requested: usize,
+    /// [`max_threads`].
+    pub max: usize,
+    /// Logical CPUs this process may run on.
+    pub cpus: usize,
+}
+
+/// The most threads [`check_threads`] allows: [`THREADS_PER_CPU`] per logical CPU this
+/// process may run on.
+pub fn max_threads() -> usize {
+    let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
+    cpus.saturating_mul(THREADS_PER_CPU)
+}
+
+/// `threads` if it is between 1 and [`max_threads`].
+pub fn check_threads(threads: usize) -> Result<usize, ThreadsError> {
+    let max = max_threads();
+    if threads == 0 || threads > max {
+        return Err(ThreadsError { requested: threads, max, cpus: max / THREADS_PER_CPU });
+    }
+    Ok(threads)
+}

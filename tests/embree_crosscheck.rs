@@ -24,7 +24,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 use raypack::embree::{EmbreeOptions, EmbreeQuality, EmbreeScene};
 use raypack::generate::{Mesh, grid, random_soup, uv_sphere};
-use raypack::methods::{Method, Output, embree_methods, output_for, raypack_methods, trace};
+use raypack::kernels::{Method, Results, embree_methods, raypack_methods, trace};
 use raypack::raysets::{self, RaySet, RaySetKind};
 use raypack::rng::Rng;
 use raypack::{BuildOptions, Hit, Isa, Material, Ray, Scene, SceneBuilder, Vec3};
@@ -383,24 +383,24 @@ fn compare_set(scene: &Scene, set: &RaySet, methods: &[Method<'_>]) -> BTreeMap<
     let rays = &set.rays;
     let reference = &methods[0];
     assert!(reference.name.contains("reference") && !reference.run.is_occlusion());
-    let mut ref_hits = output_for(&reference.run, rays.len());
+    let mut ref_hits = Results::for_run(&reference.run, rays.len());
     trace(&reference.run, rays, &mut ref_hits);
-    let Output::Hits(ref_hits) = ref_hits else { unreachable!() };
+    let Results::Hits(ref_hits) = ref_hits else { unreachable!() };
     let ref_occ: Vec<bool> = rays.par_iter().map(|r| scene.occluded1_reference(r)).collect();
 
     // Phase 1: every method's disagreements with the reference.
     // Per method: its name and (ray, its answer, the reference's) where they differ.
     let mut disagreements: Vec<(String, Vec<Disagreement>)> = Vec::new();
     for m in methods {
-        let mut out = output_for(&m.run, rays.len());
+        let mut out = Results::for_run(&m.run, rays.len());
         trace(&m.run, rays, &mut out);
         let list: Vec<Disagreement> = match &out {
-            Output::Hits(h) => (0..rays.len())
+            Results::Hits(h) => (0..rays.len())
                 .into_par_iter()
                 .filter(|&i| !agrees(scene, &rays[i], &ref_hits[i], &h[i]))
                 .map(|i| (i, Answer::Hit(ref_hits[i]), Answer::Hit(h[i])))
                 .collect(),
-            Output::Occluded(o) => (0..rays.len())
+            Results::Occluded(o) => (0..rays.len())
                 .into_par_iter()
                 .filter(|&i| o[i] != ref_occ[i])
                 .map(|i| (i, Answer::Occluded(ref_occ[i]), Answer::Occluded(o[i])))

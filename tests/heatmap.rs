@@ -26,7 +26,7 @@ fn check(scene: &Scene, name: &str, width: usize, height: usize) {
                     HeatmapRays::Camera => {
                         // The same hit as the uncounted query: the counted kernel is the one
                         // that traces.
-                        let hit = scene.intersect1_counted(&ray, &mut c);
+                        let hit = scene.counting(&mut c).intersect1(&ray);
                         assert_eq!(hit, scene.intersect1(&ray));
                         // A hit was found by testing a block.
                         assert!(!hit.is_hit() || c.blocks >= 1, "{name} pixel ({x}, {y}): {c:?}");
@@ -34,7 +34,7 @@ fn check(scene: &Scene, name: &str, width: usize, height: usize) {
                     }
                     HeatmapRays::Shadow => {
                         if let Some(s) = heatmap::shadow_ray(scene, &light, &ray) {
-                            let occ = scene.occluded1_counted(&s, &mut c);
+                            let occ = scene.counting(&mut c).occluded1(&s);
                             assert_eq!(occ, scene.occluded1(&s));
                             assert!(!occ || c.blocks >= 1, "{name} pixel ({x}, {y}): {c:?}");
                             hits += 1;

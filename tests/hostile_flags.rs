@@ -12,7 +12,7 @@ use std::path::Path;
 fn thread_counts_are_capped_at_a_multiple_of_the_cpus() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("t.png");
-    let max = raypack::methods::max_threads();
+    let max = raypack::system::max_threads();
     let too_many = (max + 1).to_string();
     let want = format!("-t {too_many}: expected 1 to {max} threads");
     expect(&["render", "-t", &too_many, "-r", "16", "12", "-f", s(&out)], 2, &want);

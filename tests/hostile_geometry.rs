@@ -15,7 +15,7 @@ use common::random_rays;
 use raypack::bvh::validate::{validate_bvh2, validate_bvh8};
 use raypack::generate::{Mesh, grid, random_soup, uv_sphere};
 use raypack::scene::builder::MAX_COORDINATE;
-use raypack::{BuildOptions, CommitReport, Hit, Material, Ray, RayPacket16, Scene, SceneBuilder, Vec3};
+use raypack::{BuildOptions, CommitReport, Hit, Material, Ray, RayPacket16, Scene, SceneBuilder, StreamOptions, Vec3};
 
 /// Commits triangles (`mesh`) and spheres with both triangle tests.
 fn commit_both(mesh: &Mesh, spheres: &[(Vec3, f32)]) -> Vec<(Scene, CommitReport)> {
@@ -67,9 +67,9 @@ fn check(what: &str, scene: &Scene, rays: &[Ray]) -> usize {
         }
     }
     let mut hits = vec![Hit::MISS; rays.len()];
-    scene.intersect_stream(rays, &mut hits);
+    scene.intersect_stream(rays, &mut hits, &StreamOptions::POOL);
     let mut occ = vec![false; rays.len()];
-    scene.occluded_stream(rays, &mut occ);
+    scene.occluded_stream(rays, &mut occ, &StreamOptions::POOL);
     for i in 0..rays.len() {
         same("intersect_stream", i, &hits[i]);
         assert_eq!(occ[i], want[i].is_hit(), "{what} ({test}) occluded_stream ray {i}");

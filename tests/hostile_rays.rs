@@ -22,7 +22,7 @@ mod common;
 use common::{every_kernel, on_every_isa, random_rays, scene_of};
 use raypack::generate::{grid, uv_sphere};
 use raypack::kernels::Results;
-use raypack::{BuildOptions, Hit, Ray, Scene, TraversalCounts, Vec3};
+use raypack::{BuildOptions, Hit, Ray, Scene, StreamOptions, TraversalCounts, Vec3};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -207,13 +207,13 @@ fn nan_rays_do_no_traversal_work() {
     let work = |scene: &Scene, rays: &[Ray]| {
         let mut c = TraversalCounts::default();
         for r in rays {
-            std::hint::black_box(scene.intersect1_counted(r, &mut c));
-            std::hint::black_box(scene.occluded1_counted(r, &mut c));
+            std::hint::black_box(scene.counting(&mut c).intersect1(r));
+            std::hint::black_box(scene.counting(&mut c).occluded1(r));
         }
         let mut hits = vec![Hit::MISS; rays.len()];
-        scene.intersect_batch_counted(rays, &mut hits, &mut c);
+        scene.counting(&mut c).intersect_stream(rays, &mut hits, &StreamOptions::CALLER);
         let mut occ = vec![false; rays.len()];
-        scene.occluded_batch_counted(rays, &mut occ, &mut c);
+        scene.counting(&mut c).occluded_stream(rays, &mut occ, &StreamOptions::CALLER);
         c
     };
     for (isa, scene) in on_every_isa(&scene) {

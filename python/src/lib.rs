@@ -64,11 +64,11 @@ impl PoolCache {
     /// `None`: the global pool (all cores, or `RAYON_NUM_THREADS`).
     fn get(&self, threads: Option<usize>) -> PyResult<Option<Arc<rayon::ThreadPool>>> {
         let Some(n) = threads else { return Ok(None) };
-        raypack::methods::check_threads(n).map_err(|e| {
+        raypack::system::check_threads(n).map_err(|e| {
             PyValueError::new_err(format!(
                 "threads: expected None (all cores) or 1 to {} threads ({} per logical CPU; this machine has {}), got {n}",
                 e.max,
-                raypack::methods::THREADS_PER_CPU,
+                raypack::system::THREADS_PER_CPU,
                 e.cpus
             ))
         })?;
@@ -851,7 +851,7 @@ fn _ray_sets<'py>(
     let sets = run_detached(py, &scene.get().pools, None, || {
         let camera = raysets::primary_for_scene(s, width, height);
         let mut hits = vec![raypack::Hit::MISS; camera.len()];
-        s.intersect_stream(&camera, &mut hits);
+        s.intersect_stream(&camera, &mut hits, &raypack::StreamOptions::POOL);
         let diffuse = raysets::diffuse_bounces(s, &camera, &hits, seed);
         let shadow = raysets::shadow_rays(s, &camera, &hits, raysets::light_above(&s.bounds()));
         [("camera", camera), ("diffuse", diffuse), ("shadow", shadow)]
@@ -895,7 +895,7 @@ fn _intersect_stream<'py>(
     let rays: Vec<raypack::Ray> = (0..rays.len).map(|i| rays.get(i)).collect();
     let mut hits = vec![raypack::Hit::MISS; rays.len()];
     let target = scene.get().target();
-    target.scene.intersect_stream(&rays, &mut hits);
+    target.scene.intersect_stream(&rays, &mut hits, &raypack::StreamOptions::POOL);
     let prim = hits.iter().map(|h| if h.is_hit() { target.caller_prim(h.prim) } else { -1 }).collect();
     Ok((
         PyArray1::from_iter(py, hits.iter().map(|h| h.t)),

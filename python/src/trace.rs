@@ -1,7 +1,7 @@
 //! The parallel loops behind `Scene.intersect` / `occluded`: rays are copied from the numpy
 //! arrays a pass at a time with the GIL held ([`passes`]: no whole copy of the rays, and no
 //! Python thread can free an array while it is read), traced with the GIL released by the
-//! scene's 16-ray packet kernels (`Scene::intersect_batch` / `occluded_batch`) and written
+//! scene's streams (`Scene::intersect_stream` / `occluded_stream`) and written
 //! straight into the output arrays (which no Python code can reach before they are returned).
 
 use crate::args::RayArgs;
@@ -9,10 +9,10 @@ use crate::{PoolCache, run_detached};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use rayon::prelude::*;
-use raypack::{Hit, Ray, Scene, Vec3};
+use raypack::{Hit, Ray, Scene, StreamOptions, Vec3};
 
-/// Rays per rayon task (as the library's own streams).
-pub const CHUNK: usize = 1024;
+/// Rays per rayon task (the library's own streams').
+pub const CHUNK: usize = raypack::scene::STREAM_CHUNK;
 
 /// Rays per pass: copied from the caller's arrays with the GIL held, then traced without it.
 /// 2 MiB of rays: the copy adds that to a query's memory, and a pass is long enough that
@@ -127,11 +127,11 @@ pub fn intersect(target: Target<'_>, rays: &[Ray], out: HitArrays<'_>) {
         .zip(normal.par_chunks_mut(3 * CHUNK))
         .zip(rays.par_chunks(CHUNK))
         .for_each_init(
-            // A whole-chunk buffer, filled anew by every chunk (`intersect_batch` writes every hit).
+            // A whole-chunk buffer, filled anew by every chunk (the stream writes every hit).
             || vec![Hit::MISS; CHUNK],
             |hit_buf, (((t, prim, u, v), normal), ray_buf)| {
                 let hit_buf = &mut hit_buf[..ray_buf.len()];
-                target.scene.intersect_batch(ray_buf, hit_buf);
+                target.scene.intersect_stream(ray_buf, hit_buf, &StreamOptions::CALLER);
                 // The normals below read each hit triangle's corners: fetched for the whole
                 // chunk first (PERFORMANCE.md, "Hit geometry prefetch").
                 target.scene.prefetch_hits(hit_buf);
@@ -158,9 +158,7 @@ pub fn intersect(target: Target<'_>, rays: &[Ray], out: HitArrays<'_>) {
 
 /// Whether anything blocks each of `rays` over `[tnear, tfar]`, into `out`.
 pub fn occluded(target: Target<'_>, rays: &[Ray], out: &mut [bool]) {
-    out.par_chunks_mut(CHUNK)
-        .zip(rays.par_chunks(CHUNK))
-        .for_each(|(out, rays)| target.scene.occluded_batch(rays, out));
+    target.scene.occluded_stream(rays, out, &StreamOptions::POOL);
 }
 
 /// All hits along each ray, nearest first, at most `max_hits` per ray.
@@ -208,7 +206,7 @@ pub fn intersect_all(target: Target<'_>, rays: &[Ray], first: usize, max_hits: u
                 batch.extend(live.iter().map(|(_, r)| *r));
                 found.clear();
                 found.resize(batch.len(), Hit::MISS);
-                target.scene.intersect_batch(&batch, &mut found);
+                target.scene.intersect_stream(&batch, &mut found, &StreamOptions::CALLER);
                 let mut next = 0;
                 for idx in 0..live.len() {
                     let hit = found[idx];

@@ -37,6 +37,11 @@ impl Counter for NoCount {
     fn add(&mut self, _: Work, _: u32) {}
 }
 
+impl std::ops::AddAssign for NoCount {
+    #[inline(always)]
+    fn add_assign(&mut self, _: Self) {}
+}
+
 /// Totals of every kind of [`Work`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct TraversalCounts {

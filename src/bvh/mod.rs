@@ -39,4 +39,5 @@ pub use collapse::{CollapseMethod, CollapseOptions, PrimShape, collapse, collaps
 pub use counters::{Counter, NoCount, TraversalCounts, Work};
 pub use limits::{BVH8_STACK, MAX_DEPTH};
 pub use node::{Bvh8Node, LeafKind, NodeRef};
+pub use queries::StreamKernel;
 pub use stats::BvhStats;

@@ -10,19 +10,20 @@
 //! |---|---|---|
 //! | [`Bvh8::intersect1_with`], [`Bvh8::occluded1_with`] | [`crate::bvh::traverse1`] | one |
 //! | [`Bvh8::intersect_packet_with`], [`Bvh8::occluded_packet_with`] | [`crate::bvh::traverse_packet`] | 8 or 16 (a [`RayPacket`]) |
-//! | [`Bvh8::intersect_interleaved_with`], [`Bvh8::occluded_interleaved_with`] | [`crate::bvh::traverse_interleaved`] | any number, on the calling thread |
-//! | [`Bvh8::intersect_stream_with`], [`Bvh8::occluded_stream_with`] | the packet kernels on consecutive packets of the ISA's stream width; in trees larger than the last-level cache, the interleaved kernels on the rays of incoherent packets | any number, on the calling thread |
+//! | [`Bvh8::intersect_stream_with`], [`Bvh8::occluded_stream_with`] | as [`StreamKernel`] says: the packet kernels on consecutive packets of the ISA's stream width, the interleaved kernels ([`crate::bvh::traverse_interleaved`]) on every ray, or the packets with their incoherent rays interleaved (by default in trees larger than the last-level cache) | any number, on the calling thread |
 //! | [`Bvh8::cone_may_hit_with`] | [`crate::bvh::frustum`] (a cone of rays as one interval frustum) | a cone of them |
 //!
 //! Every query takes the ISA to run on (normally the scene's, [`crate::Scene::isa`]) and a
-//! work [`Counter`] ([`NoCount`] compiles away).
+//! work [`Counter`] ([`NoCount`] compiles away). The stream loop is written once for both
+//! queries (`StreamQuery`: what a packet and a single ray of each compute).
 
 use crate::bvh::Bvh8;
+use crate::bvh::bvh8::Bvh8Ref;
 use crate::bvh::counters::{Counter, NoCount};
 use crate::bvh::frustum::Frustum;
 use crate::bvh::traverse_packet::{OccluderCache, PacketRays, intersect_hybrid, occluded_hybrid};
 use crate::bvh::traverse1::Ray1;
-use crate::geometry::{MollerTrumboreKernel, TriBlock, TriangleTest, WatertightKernel};
+use crate::geometry::{MollerTrumboreKernel, TriBlock, TriangleKernel, TriangleTest, WatertightKernel};
 use crate::math::Vec3;
 use crate::ray::{Hit, Ray, RayPacket};
 use crate::simd::isa::{IsaOp, dispatch};
@@ -170,128 +171,118 @@ impl<T: TriBlock, R: RayPacket, C: Counter> IsaOp for OccludedPacket<'_, T, R, C
     }
 }
 
-struct IntersectInterleaved<'a, T: TriBlock, C, R> {
-    bvh: &'a Bvh8<T>,
-    rays: &'a [Ray],
-    ids: R,
-    hits: &'a mut [Hit],
-    counter: &'a mut C,
+/// The two stream queries, closest hit ([`Closest`]) and any hit ([`AnyHit`]): what one
+/// packet of a stream computes and where its answers go, so that [`Stream`] is written once.
+trait StreamQuery {
+    /// One answer per ray: a [`Hit`] or whether the ray is blocked.
+    type Out;
+    /// What the query carries from packet to packet (the any-hit query's [`OccluderCache`]).
+    type Carry: Default;
+
+    /// Traces packet `p` and writes its answers into `out` (one per ray of `p`).
+    fn packet<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
+        bvh: &Bvh8Ref<'_, T>,
+        p: PacketRays<I::Stream>,
+        carry: &mut Self::Carry,
+        out: &mut [Self::Out],
+        counter: &mut C,
+    );
+
+    /// Traces the rays `rays[i]` for `i` in `ids` as interleaved single rays into `out[i]`.
+    fn interleaved<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
+        bvh: &Bvh8Ref<'_, T>,
+        rays: &[Ray],
+        ids: impl Iterator<Item = usize>,
+        out: &mut [Self::Out],
+        counter: &mut C,
+    );
 }
 
-impl<T: TriBlock, C: Counter, R: Iterator<Item = usize>> IsaOp for IntersectInterleaved<'_, T, C, R> {
-    type Output = ();
+/// The closest-hit stream.
+struct Closest;
+
+impl StreamQuery for Closest {
+    type Out = Hit;
+    type Carry = ();
+
     #[inline(always)]
-    fn run<I: IsaLanes>(self) {
-        let bvh = self.bvh.slices();
-        with_kernel!(bvh.test, P => bvh.intersect_interleaved::<I, P, C>(self.rays, self.ids, self.hits, self.counter))
+    fn packet<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
+        bvh: &Bvh8Ref<'_, T>,
+        mut p: PacketRays<I::Stream>,
+        _: &mut (),
+        out: &mut [Hit],
+        counter: &mut C,
+    ) {
+        intersect_hybrid::<_, I, T, P, C>(bvh, &mut p, HYBRID_THRESHOLD, counter);
+        store_stream_hits(&p, out);
+    }
+
+    #[inline(always)]
+    fn interleaved<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
+        bvh: &Bvh8Ref<'_, T>,
+        rays: &[Ray],
+        ids: impl Iterator<Item = usize>,
+        out: &mut [Hit],
+        counter: &mut C,
+    ) {
+        bvh.intersect_interleaved::<I, P, C>(rays, ids, out, counter)
     }
 }
 
-struct OccludedInterleaved<'a, T: TriBlock, C, R> {
-    bvh: &'a Bvh8<T>,
-    rays: &'a [Ray],
-    ids: R,
-    occluded: &'a mut [bool],
-    counter: &'a mut C,
-}
+/// The any-hit stream, carrying an [`OccluderCache`] from packet to packet.
+struct AnyHit;
 
-impl<T: TriBlock, C: Counter, R: Iterator<Item = usize>> IsaOp for OccludedInterleaved<'_, T, C, R> {
-    type Output = ();
+impl StreamQuery for AnyHit {
+    type Out = bool;
+    type Carry = OccluderCache;
+
     #[inline(always)]
-    fn run<I: IsaLanes>(self) {
-        let bvh = self.bvh.slices();
-        with_kernel!(bvh.test, P => bvh.occluded_interleaved::<I, P, C>(self.rays, self.ids, self.occluded, self.counter))
+    fn packet<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
+        bvh: &Bvh8Ref<'_, T>,
+        p: PacketRays<I::Stream>,
+        cache: &mut OccluderCache,
+        out: &mut [bool],
+        counter: &mut C,
+    ) {
+        let bits = occluded_hybrid::<_, I, T, P, C>(bvh, &p, HYBRID_THRESHOLD, cache, counter);
+        for (i, x) in out.iter_mut().enumerate() {
+            *x = bits >> i & 1 != 0;
+        }
+    }
+
+    #[inline(always)]
+    fn interleaved<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
+        bvh: &Bvh8Ref<'_, T>,
+        rays: &[Ray],
+        ids: impl Iterator<Item = usize>,
+        out: &mut [bool],
+        counter: &mut C,
+    ) {
+        bvh.occluded_interleaved::<I, P, C>(rays, ids, out, counter)
     }
 }
 
-struct IntersectStream<'a, T: TriBlock, C> {
+/// A stream of query `Q` from ray `from` on, as packets of consecutive rays of the ISA's
+/// stream width. With `SET_ASIDE`, the rays of incoherent packets ([`incoherent_packet`]) are
+/// set aside in `pending` instead of traced, and the op returns where it stopped: the end of
+/// the rays, or the ray after the packet that filled `pending`. (`SET_ASIDE` is a constant so
+/// that the packet-only stream is an instantiation of its own, without the coherence test.)
+struct Stream<'a, T: TriBlock, C, Q: StreamQuery, const SET_ASIDE: bool> {
     bvh: &'a Bvh8<T>,
     rays: &'a [Ray],
-    hits: &'a mut [Hit],
-    counter: &'a mut C,
-}
-
-impl<T: TriBlock, C: Counter> IsaOp for IntersectStream<'_, T, C> {
-    type Output = ();
-    #[inline(always)]
-    fn run<I: IsaLanes>(self) {
-        type V<I> = <I as IsaLanes>::Stream;
-        let k = V::<I>::LANES;
-        let (bvh, rays) = (self.bvh.slices(), self.rays);
-        with_kernel!(bvh.test, P => {
-            for (n, (r, h)) in rays.chunks(k).zip(self.hits.chunks_mut(k)).enumerate() {
-                prefetch_rays(rays, (n + 2) * k, k);
-                let mut p = PacketRays::<V<I>>::new_in::<I::F8>(r, u32::MAX);
-                intersect_hybrid::<_, I, T, P, C>(&bvh, &mut p, HYBRID_THRESHOLD, self.counter);
-                let (mut t, mut u, mut v, mut prim) = ([0.0f32; 16], [0.0f32; 16], [0.0f32; 16], [0u32; 16]);
-                p.store_hits(&mut t, &mut u, &mut v, &mut prim);
-                for (i, out) in h.iter_mut().enumerate() {
-                    let miss = prim[i] == Hit::NONE;
-                    *out = Hit { t: if miss { f32::INFINITY } else { t[i] }, u: u[i], v: v[i], prim: prim[i] };
-                }
-            }
-        })
-    }
-}
-
-/// [`IntersectStream`] from ray `from` on, with the rays of incoherent packets
-/// ([`incoherent_packet`]) set aside in `pending` instead of traced; returns where it stopped:
-/// the end of the rays, or the ray after the packet that filled `pending`. (An instantiation
-/// of its own, so that the packet-only stream is compiled as it was.)
-struct IntersectStreamSettingAside<'a, T: TriBlock, C> {
-    bvh: &'a Bvh8<T>,
-    rays: &'a [Ray],
-    hits: &'a mut [Hit],
+    out: &'a mut [Q::Out],
     counter: &'a mut C,
     from: usize,
     pending: &'a mut Pending,
 }
 
-impl<T: TriBlock, C: Counter> IsaOp for IntersectStreamSettingAside<'_, T, C> {
+impl<T: TriBlock, C: Counter, Q: StreamQuery, const SET_ASIDE: bool> IsaOp for Stream<'_, T, C, Q, SET_ASIDE> {
     type Output = usize;
     #[inline(always)]
     fn run<I: IsaLanes>(self) -> usize {
         let k = I::Stream::LANES;
         let (bvh, rays) = (self.bvh.slices(), self.rays);
-        with_kernel!(bvh.test, P => {
-            let mut at = self.from;
-            while at < rays.len() {
-                let batch = at..rays.len().min(at + k);
-                at = batch.end;
-                prefetch_rays(rays, at + k, k);
-                let mut p = PacketRays::<I::Stream>::new_in::<I::F8>(&rays[batch.clone()], u32::MAX);
-                if incoherent_packet(&p) {
-                    if self.pending.add(batch) {
-                        break;
-                    }
-                    continue;
-                }
-                intersect_hybrid::<_, I, T, P, C>(&bvh, &mut p, HYBRID_THRESHOLD, self.counter);
-                store_stream_hits(&p, &mut self.hits[batch]);
-            }
-            at
-        })
-    }
-}
-
-/// [`OccludedStream`] from ray `from` on, setting aside the rays of incoherent packets as
-/// [`IntersectStreamSettingAside`] does.
-struct OccludedStreamSettingAside<'a, T: TriBlock, C> {
-    bvh: &'a Bvh8<T>,
-    rays: &'a [Ray],
-    occluded: &'a mut [bool],
-    counter: &'a mut C,
-    from: usize,
-    pending: &'a mut Pending,
-}
-
-impl<T: TriBlock, C: Counter> IsaOp for OccludedStreamSettingAside<'_, T, C> {
-    type Output = usize;
-    #[inline(always)]
-    fn run<I: IsaLanes>(self) -> usize {
-        let k = I::Stream::LANES;
-        let (bvh, rays) = (self.bvh.slices(), self.rays);
-        let mut cache = OccluderCache::default();
+        let mut carry = Q::Carry::default();
         with_kernel!(bvh.test, P => {
             let mut at = self.from;
             while at < rays.len() {
@@ -299,19 +290,35 @@ impl<T: TriBlock, C: Counter> IsaOp for OccludedStreamSettingAside<'_, T, C> {
                 at = batch.end;
                 prefetch_rays(rays, at + k, k);
                 let p = PacketRays::<I::Stream>::new_in::<I::F8>(&rays[batch.clone()], u32::MAX);
-                if incoherent_packet(&p) {
+                if SET_ASIDE && incoherent_packet(&p) {
                     if self.pending.add(batch) {
                         break;
                     }
                     continue;
                 }
-                let bits = occluded_hybrid::<_, I, T, P, C>(&bvh, &p, HYBRID_THRESHOLD, &mut cache, self.counter);
-                for (i, x) in self.occluded[batch].iter_mut().enumerate() {
-                    *x = bits >> i & 1 != 0;
-                }
+                Q::packet::<I, T, P, C>(&bvh, p, &mut carry, &mut self.out[batch], self.counter);
             }
             at
         })
+    }
+}
+
+/// Single rays of query `Q`, `rays[i]` for `i` in `ids`, interleaved
+/// ([`crate::bvh::traverse_interleaved`]).
+struct Interleaved<'a, T: TriBlock, C, Q: StreamQuery, R> {
+    bvh: &'a Bvh8<T>,
+    rays: &'a [Ray],
+    ids: R,
+    out: &'a mut [Q::Out],
+    counter: &'a mut C,
+}
+
+impl<T: TriBlock, C: Counter, Q: StreamQuery, R: Iterator<Item = usize>> IsaOp for Interleaved<'_, T, C, Q, R> {
+    type Output = ();
+    #[inline(always)]
+    fn run<I: IsaLanes>(self) {
+        let bvh = self.bvh.slices();
+        with_kernel!(bvh.test, P => Q::interleaved::<I, T, P, C>(&bvh, self.rays, self.ids, self.out, self.counter))
     }
 }
 
@@ -323,34 +330,6 @@ fn store_stream_hits<V: Lanes>(p: &PacketRays<V>, h: &mut [Hit]) {
     for (i, out) in h.iter_mut().enumerate() {
         let miss = prim[i] == Hit::NONE;
         *out = Hit { t: if miss { f32::INFINITY } else { t[i] }, u: u[i], v: v[i], prim: prim[i] };
-    }
-}
-
-struct OccludedStream<'a, T: TriBlock, C> {
-    bvh: &'a Bvh8<T>,
-    rays: &'a [Ray],
-    occluded: &'a mut [bool],
-    counter: &'a mut C,
-}
-
-impl<T: TriBlock, C: Counter> IsaOp for OccludedStream<'_, T, C> {
-    type Output = ();
-    #[inline(always)]
-    fn run<I: IsaLanes>(self) {
-        type V<I> = <I as IsaLanes>::Stream;
-        let k = V::<I>::LANES;
-        let (bvh, rays) = (self.bvh.slices(), self.rays);
-        let mut cache = OccluderCache::default();
-        with_kernel!(bvh.test, P => {
-            for (n, (r, o)) in rays.chunks(k).zip(self.occluded.chunks_mut(k)).enumerate() {
-                prefetch_rays(rays, (n + 2) * k, k);
-                let p = PacketRays::<V<I>>::new_in::<I::F8>(r, u32::MAX);
-                let bits = occluded_hybrid::<_, I, T, P, C>(&bvh, &p, HYBRID_THRESHOLD, &mut cache, self.counter);
-                for (i, x) in o.iter_mut().enumerate() {
-                    *x = bits >> i & 1 != 0;
-                }
-            }
-        })
     }
 }
 
@@ -479,98 +458,74 @@ impl<T: TriBlock> Bvh8<T> {
         dispatch(isa, OccludedPacket { bvh: self, packet, valid, counter })
     }
 
-    /// Closest hits of `rays` into `hits` (same length) on the calling thread, as packets of
-    /// consecutive rays, on `isa`'s kernels. Misses are [`Hit::MISS`]. In a tree larger than
-    /// the last-level cache ([`Bvh8::interleaves`]) the rays of incoherent packets (directions
-    /// of both signs on two axes or more) are traced as single rays several at a time instead
-    /// ([`crate::bvh::traverse_interleaved`]).
-    pub fn intersect_stream_with<C: Counter>(&self, isa: Isa, rays: &[Ray], hits: &mut [Hit], counter: &mut C) {
-        self.intersect_stream_as(isa, rays, hits, counter, self.interleaves());
-    }
-
-    /// [`Bvh8::intersect_stream_with`], interleaving the rays of incoherent packets when
-    /// `interleave` is set, whatever the tree's size.
-    pub(crate) fn intersect_stream_as<C: Counter>(
+    /// Closest hits of `rays` into `hits` (same length) on the calling thread, traced as
+    /// `kernel` says, on `isa`'s kernels. Misses are [`Hit::MISS`].
+    pub fn intersect_stream_with<C: Counter>(
         &self,
         isa: Isa,
         rays: &[Ray],
         hits: &mut [Hit],
+        kernel: StreamKernel,
         counter: &mut C,
-        interleave: bool,
     ) {
         assert_eq!(rays.len(), hits.len(), "one hit per ray");
-        if !interleave {
-            return dispatch(isa, IntersectStream { bvh: self, rays, hits, counter });
-        }
-        let (mut pending, mut at) = (Pending::new(), 0);
-        while at < rays.len() {
-            let op = IntersectStreamSettingAside {
-                bvh: self,
-                rays,
-                hits: &mut *hits,
-                counter: &mut *counter,
-                from: at,
-                pending: &mut pending,
-            };
-            at = dispatch(isa, op);
-            if !pending.is_empty() {
-                dispatch(
-                    isa,
-                    IntersectInterleaved {
-                        bvh: self,
-                        rays,
-                        ids: pending.drain(),
-                        hits: &mut *hits,
-                        counter: &mut *counter,
-                    },
-                );
-            }
-        }
+        self.stream::<Closest, C>(isa, rays, hits, kernel, counter);
     }
 
-    /// Occlusion of `rays` into `occluded` (same length) on the calling thread, as packets of
-    /// consecutive rays carrying an [`OccluderCache`], on `isa`'s kernels; the rays of
-    /// incoherent packets interleaved as in [`Bvh8::intersect_stream_with`].
-    pub fn occluded_stream_with<C: Counter>(&self, isa: Isa, rays: &[Ray], occluded: &mut [bool], counter: &mut C) {
-        self.occluded_stream_as(isa, rays, occluded, counter, self.interleaves());
-    }
-
-    /// [`Bvh8::occluded_stream_with`], interleaving the rays of incoherent packets when
-    /// `interleave` is set, whatever the tree's size.
-    pub(crate) fn occluded_stream_as<C: Counter>(
+    /// Occlusion of `rays` into `occluded` (same length) on the calling thread, traced as
+    /// `kernel` says (packets carry an [`OccluderCache`] from one to the next), on `isa`'s
+    /// kernels.
+    pub fn occluded_stream_with<C: Counter>(
         &self,
         isa: Isa,
         rays: &[Ray],
         occluded: &mut [bool],
+        kernel: StreamKernel,
         counter: &mut C,
-        interleave: bool,
     ) {
         assert_eq!(rays.len(), occluded.len(), "one answer per ray");
-        if !interleave {
-            return dispatch(isa, OccludedStream { bvh: self, rays, occluded, counter });
-        }
-        let (mut pending, mut at) = (Pending::new(), 0);
-        while at < rays.len() {
-            let op = OccludedStreamSettingAside {
-                bvh: self,
-                rays,
-                occluded: &mut *occluded,
-                counter: &mut *counter,
-                from: at,
-                pending: &mut pending,
-            };
-            at = dispatch(isa, op);
-            if !pending.is_empty() {
-                dispatch(
-                    isa,
-                    OccludedInterleaved {
+        self.stream::<AnyHit, C>(isa, rays, occluded, kernel, counter);
+    }
+
+    /// The stream driver of both queries: packets, single rays, or packets whose incoherent
+    /// rays are set aside and traced as interleaved single rays whenever
+    /// [`PENDING_RUNS`] packets are waiting.
+    fn stream<Q: StreamQuery, C: Counter>(
+        &self,
+        isa: Isa,
+        rays: &[Ray],
+        out: &mut [Q::Out],
+        kernel: StreamKernel,
+        counter: &mut C,
+    ) {
+        let mut pending = Pending::new();
+        match kernel.resolve(self) {
+            StreamKernel::Interleaved => {
+                dispatch(isa, Interleaved::<T, C, Q, _> { bvh: self, rays, ids: 0..rays.len(), out, counter });
+            }
+            StreamKernel::Packets => {
+                let op = Stream::<T, C, Q, false> { bvh: self, rays, out, counter, from: 0, pending: &mut pending };
+                dispatch(isa, op);
+            }
+            StreamKernel::Auto | StreamKernel::Hybrid => {
+                let mut at = 0;
+                while at < rays.len() {
+                    let op = Stream::<T, C, Q, true> {
                         bvh: self,
                         rays,
-                        ids: pending.drain(),
-                        occluded: &mut *occluded,
+                        out: &mut *out,
                         counter: &mut *counter,
-                    },
-                );
+                        from: at,
+                        pending: &mut pending,
+                    };
+                    at = dispatch(isa, op);
+                    if !pending.is_empty() {
+                        let ids = pending.drain();
+                        let op =
+                            Interleaved::<T, C, Q, _> { bvh: self, rays, ids, out: &mut *out, counter: &mut *counter };
+                        dispatch(isa, op);
+                    }
+                }
             }
         }
     }
@@ -587,31 +542,41 @@ impl<T: TriBlock> Bvh8<T> {
     pub fn interleaves(&self) -> bool {
         self.bytes() as u64 > crate::system::last_level_cache_bytes()
     }
+}
 
-    /// Closest hits of `rays` into `hits` (same length) on the calling thread as single rays,
-    /// [`crate::bvh::traverse_interleaved::FLIGHTS`] in flight at once, on `isa`'s kernels.
-    pub fn intersect_interleaved_with<C: Counter>(&self, isa: Isa, rays: &[Ray], hits: &mut [Hit], counter: &mut C) {
-        assert_eq!(rays.len(), hits.len(), "one hit per ray");
-        dispatch(isa, IntersectInterleaved { bvh: self, rays, ids: 0..rays.len(), hits, counter })
-    }
+/// How a stream query traces its rays (every way gives the same answers).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum StreamKernel {
+    /// [`StreamKernel::Hybrid`] in a tree larger than the last-level cache
+    /// ([`Bvh8::interleaves`]), [`StreamKernel::Packets`] otherwise.
+    #[default]
+    Auto,
+    /// Packets of consecutive rays of the ISA's stream width through the hybrid packet
+    /// kernels ([`crate::bvh::traverse_packet`]), whatever the tree.
+    Packets,
+    /// Packets, but the rays of incoherent packets (directions of both signs on two axes or
+    /// more) as single rays several in flight at once ([`crate::bvh::traverse_interleaved`]),
+    /// whatever the tree.
+    Hybrid,
+    /// Every ray as a single ray, several in flight at once
+    /// ([`crate::bvh::traverse_interleaved`]).
+    Interleaved,
+}
 
-    /// Occlusion of `rays` into `occluded` (same length) on the calling thread as single
-    /// rays, several in flight at once, on `isa`'s kernels.
-    pub fn occluded_interleaved_with<C: Counter>(
-        &self,
-        isa: Isa,
-        rays: &[Ray],
-        occluded: &mut [bool],
-        counter: &mut C,
-    ) {
-        assert_eq!(rays.len(), occluded.len(), "one answer per ray");
-        dispatch(isa, OccludedInterleaved { bvh: self, rays, ids: 0..rays.len(), occluded, counter })
+impl StreamKernel {
+    /// The kernel that runs on `bvh`: [`StreamKernel::Auto`] decided by the tree's size.
+    pub fn resolve<T: TriBlock>(self, bvh: &Bvh8<T>) -> StreamKernel {
+        match self {
+            StreamKernel::Auto if bvh.interleaves() => StreamKernel::Hybrid,
+            StreamKernel::Auto => StreamKernel::Packets,
+            k => k,
+        }
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use super::incoherent_packet;
+    use super::{StreamKernel, incoherent_packet};
     use crate::bvh::NoCount;
     use crate::bvh::traverse_packet::PacketRays;
     use crate::generate::random_soup;
@@ -668,8 +633,8 @@ mod tests {
         for isa in Isa::available() {
             let mut hits = vec![Hit { t: -1.0, ..Hit::MISS }; rays.len()];
             let mut blocked = vec![true; rays.len()];
-            bvh.intersect_stream_as(isa, &rays, &mut hits, &mut NoCount, true);
-            bvh.occluded_stream_as(isa, &rays, &mut blocked, &mut NoCount, true);
+            bvh.intersect_stream_with(isa, &rays, &mut hits, StreamKernel::Hybrid, &mut NoCount);
+            bvh.occluded_stream_with(isa, &rays, &mut blocked, StreamKernel::Hybrid, &mut NoCount);
             let mut hit_count = 0;
             for (i, r) in rays.iter().enumerate() {
                 let want = bvh.intersect1_with(isa, r, &mut NoCount);

@@ -169,11 +169,11 @@ pub fn trace_counts_window(
                 let mut c = TraversalCounts::default();
                 match &light {
                     None => {
-                        scene.intersect1_counted(&ray, &mut c);
+                        scene.counting(&mut c).intersect1(&ray);
                     }
                     Some(light) => {
                         if let Some(shadow) = shadow_ray(scene, light, &ray) {
-                            scene.occluded1_counted(&shadow, &mut c);
+                            scene.counting(&mut c).occluded1(&shadow);
                         }
                     }
                 }

@@ -158,10 +158,10 @@ pub fn tests_per_ray(scene: &Scene, rays: &[Ray], kind: RayKind, brute_force: bo
     for ray in rays {
         match kind {
             RayKind::Shadow => {
-                scene.occluded1_counted(ray, &mut counts);
+                scene.counting(&mut counts).occluded1(ray);
             }
             RayKind::Camera | RayKind::Bounce => {
-                scene.intersect1_counted(ray, &mut counts);
+                scene.counting(&mut counts).intersect1(ray);
             }
         }
     }

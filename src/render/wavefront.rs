@@ -171,7 +171,7 @@ impl Wavefront {
         let c = &mut self.camera;
         log.record(RayKind::Camera, &c.rays);
         resize(&mut c.hits, c.rays.len(), Hit::MISS);
-        tracer.closest_batch(&c.rays, &mut c.hits);
+        tracer.intersect_stream(&c.rays, &mut c.hits);
         clock.lap(&mut times.trace[RayKind::Camera as usize]);
         if !integrator.traces_paths() {
             let values = c.rays.iter().zip(&c.hits).map(|(ray, hit)| integrator.camera_only(ray, hit));
@@ -297,7 +297,7 @@ impl Wavefront {
             q.sort(order.bounce, bounds, &mut self.scratch);
             clock.lap(&mut times.sort);
             resize(&mut q.hits, q.rays.len(), Hit::MISS);
-            tracer.closest_batch(&q.rays, &mut q.hits);
+            tracer.intersect_stream(&q.rays, &mut q.hits);
             clock.lap(&mut times.trace[RayKind::Bounce as usize]);
         }
     }
@@ -330,7 +330,7 @@ impl DirectContext<'_, '_> {
             s.sort(order.shadow, bounds, scratch);
             clock.lap(&mut times.sort);
             resize(&mut s.occluded, s.rays.len(), false);
-            tracer.occluded_batch(&s.rays, &mut s.occluded);
+            tracer.occluded_stream(&s.rays, &mut s.occluded);
             clock.lap(&mut times.trace[RayKind::Shadow as usize]);
             for (&blocked, &i) in s.occluded.iter().zip(&s.owner) {
                 d.samples[i as usize].visible = !blocked;
@@ -343,7 +343,7 @@ impl DirectContext<'_, '_> {
             p.sort(order.bounce, bounds, scratch);
             clock.lap(&mut times.sort);
             resize(&mut p.hits, p.rays.len(), Hit::MISS);
-            tracer.closest_batch(&p.rays, &mut p.hits);
+            tracer.intersect_stream(&p.rays, &mut p.hits);
             clock.lap(&mut times.trace[RayKind::Bounce as usize]);
             for ((ray, hit), &i) in p.rays.iter().zip(&p.hits).zip(&p.owner) {
                 d.samples[i as usize].radiance = integrator.probe_radiance(hit, ray.dir);

@@ -1,5 +1,6 @@
 //! Ray queries on a committed [`Scene`] beyond single rays: 8- and 16-ray packets and
-//! streams of any length, run over rayon.
+//! streams of any length, on the calling thread or over rayon ([`StreamOptions`]), and the
+//! same queries counting their work ([`Scene::counting`]).
 //!
 //! All of them use the hybrid packet kernels of [`crate::bvh::traverse_packet`], which adapt
 //! to the rays they are given: a frustum prefilter when the packet's direction signs agree
@@ -11,21 +12,83 @@
 //! "Streams"), but in a tree larger than the last-level cache ([`crate::bvh::Bvh8::interleaves`]):
 //! there the rays of incoherent packets are traced as single rays, several in flight at once
 //! so that their cache misses overlap ([`crate::bvh::traverse_interleaved`];
-//! [`Scene::intersect_interleaved`] and [`Scene::occluded_interleaved`] trace that way
-//! whatever the tree). Shadow-ray streams also carry an
+//! [`StreamOptions::kernel`] chooses the way whatever the tree). Shadow-ray streams also carry an
 //! [`OccluderCache`](crate::bvh::traverse_packet::OccluderCache) from packet to packet.
 
-use crate::bvh::{Counter, NoCount};
+use crate::bvh::{Counter, NoCount, StreamKernel};
 use crate::math::Vec3;
 use crate::ray::{Hit, Ray, RayPacket8, RayPacket16};
 use crate::scene::Scene;
 use rayon::prelude::*;
 
-/// Rays per rayon task of the stream queries (64 packets of 16). Every chunk is a task of
-/// its own (`with_max_len(1)`): rayon's default split stops at about two tasks per thread
-/// and does not split a task once it runs, so a thread could finish its share of a batch and
-/// wait for the other's last large task (PERFORMANCE.md, "Work split over threads").
-const STREAM_CHUNK: usize = 1024;
+/// Rays per rayon task of the stream queries on the pool (64 packets of 16). Every chunk is a
+/// task of its own (`with_max_len(1)`): rayon's default split stops at about two tasks per
+/// thread and does not split a task once it runs, so a thread could finish its share of a
+/// batch and wait for the other's last large task (PERFORMANCE.md, "Work split over threads").
+pub const STREAM_CHUNK: usize = 1024;
+
+/// On which threads a stream query runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Threads {
+    /// Every thread of the current rayon pool, in chunks of [`STREAM_CHUNK`] rays.
+    #[default]
+    Pool,
+    /// The calling thread only.
+    Caller,
+}
+
+/// How [`Scene::intersect_stream`] and [`Scene::occluded_stream`] run: on which threads, and
+/// with which kernel ([`StreamKernel`]; every kernel gives the same answers).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StreamOptions {
+    /// The threads.
+    pub threads: Threads,
+    /// The kernel.
+    pub kernel: StreamKernel,
+}
+
+impl StreamOptions {
+    /// Every thread of the pool, the kernel chosen by the tree's size (the default).
+    pub const POOL: StreamOptions = StreamOptions { threads: Threads::Pool, kernel: StreamKernel::Auto };
+    /// The calling thread, the kernel chosen by the tree's size.
+    pub const CALLER: StreamOptions = StreamOptions { threads: Threads::Caller, kernel: StreamKernel::Auto };
+
+    /// These options with `kernel`.
+    pub const fn with_kernel(self, kernel: StreamKernel) -> StreamOptions {
+        StreamOptions { kernel, ..self }
+    }
+}
+
+/// Runs `f` on matching chunks of `items` and `out` (of [`STREAM_CHUNK`] items, each a rayon
+/// task of its own) over the current rayon pool, each chunk counting its work into a counter
+/// of its own; the chunks' counts are added into `counter`. The one parallel loop of the
+/// stream queries, the kernel registry's runs and the Python module's queries.
+///
+/// # Panics
+/// When `out` is shorter than `items`.
+pub fn par_for_each_chunk<A, B, C, F>(items: &[A], out: &mut [B], counter: &mut C, f: F)
+where
+    A: Sync,
+    B: Send,
+    C: Counter + Default + Send + std::ops::AddAssign,
+    F: Fn(&[A], &mut [B], &mut C) + Sync,
+{
+    assert!(out.len() >= items.len(), "one answer per item");
+    let total = items
+        .par_chunks(STREAM_CHUNK)
+        .zip(out.par_chunks_mut(STREAM_CHUNK))
+        .with_max_len(1)
+        .map(|(a, b)| {
+            let mut c = C::default();
+            f(a, b, &mut c);
+            c
+        })
+        .reduce(C::default, |mut a, b| {
+            a += b;
+            a
+        });
+    *counter += total;
+}
 
 macro_rules! packet_queries {
     ($intersect:ident, $occluded:ident, $packet:ty, $mask:ty, $doc_k:expr) => {
@@ -85,31 +148,74 @@ impl Scene {
     packet_queries!(intersect8, occluded8, RayPacket8, u8, "8");
     packet_queries!(intersect16, occluded16, RayPacket16, u16, "16");
 
-    /// Closest hits of `rays` into `hits` (same length), over all rayon threads: the rays are
-    /// traced as 16-ray packets in the order given, so consecutive rays should be coherent when
-    /// they can be (camera rays in small pixel tiles, shadow rays of neighbouring pixels). The
-    /// packet kernel adapts to incoherent rays by itself (see [`crate::bvh::traverse_packet`]);
-    /// in a scene whose BVH is larger than the last-level cache, the rays of incoherent packets
-    /// are traced as single rays several at a time instead ([`Scene::intersect_interleaved`]).
+    /// Closest hits of `rays` into `hits` (same length), on the threads and with the kernel
+    /// of `opts`. By default ([`StreamOptions::POOL`]) over all threads of the rayon pool, as
+    /// 16-ray packets in the order given, so consecutive rays should be coherent when they
+    /// can be (camera rays in small pixel tiles, shadow rays of neighbouring pixels). The
+    /// packet kernel adapts to incoherent rays by itself (see
+    /// [`crate::bvh::traverse_packet`]); in a scene whose BVH is larger than the last-level
+    /// cache, the rays of incoherent packets are traced as single rays several at a time
+    /// instead ([`StreamKernel`]). The hits are [`Scene::intersect1`]'s.
     ///
     /// ```
-    /// # use raypack::{BuildOptions, Hit, Material, Ray, SceneBuilder, Vec3};
+    /// # use raypack::{BuildOptions, Hit, Material, Ray, SceneBuilder, StreamKernel, StreamOptions, Vec3};
     /// let mut b = SceneBuilder::new();
     /// let m = b.add_material(Material::default());
     /// b.add_sphere(Vec3::ZERO, 1.0, m)?;
     /// let (scene, _) = b.commit(&BuildOptions::default());
     /// let rays: Vec<Ray> = (0..100).map(|i| Ray::new(Vec3::new(i as f32 * 0.01, 0.0, 5.0), -Vec3::Z)).collect();
     /// let mut hits = vec![Hit::MISS; rays.len()];
-    /// scene.intersect_stream(&rays, &mut hits);
+    /// scene.intersect_stream(&rays, &mut hits, &StreamOptions::POOL);
     /// assert!(hits.iter().all(|h| h.prim == 0 && h.t < 5.0));
+    /// // On this thread only, every ray a single ray: the same hits.
+    /// let mut again = vec![Hit::MISS; rays.len()];
+    /// scene.intersect_stream(&rays, &mut again, &StreamOptions::CALLER.with_kernel(StreamKernel::Interleaved));
+    /// assert_eq!(hits, again);
     /// # Ok::<(), raypack::SceneError>(())
     /// ```
-    pub fn intersect_stream(&self, rays: &[Ray], hits: &mut [Hit]) {
-        assert_eq!(rays.len(), hits.len(), "one hit per ray");
-        rays.par_chunks(STREAM_CHUNK)
-            .zip(hits.par_chunks_mut(STREAM_CHUNK))
-            .with_max_len(1)
-            .for_each(|(r, h)| self.intersect_batch(r, h));
+    pub fn intersect_stream(&self, rays: &[Ray], hits: &mut [Hit], opts: &StreamOptions) {
+        self.counting(&mut NoCount).intersect_stream(rays, hits, opts);
+    }
+
+    /// Occlusion of `rays` into `occluded` (same length), on the threads and with the kernel
+    /// of `opts` (see [`Scene::intersect_stream`]); packets carry an
+    /// [`OccluderCache`](crate::bvh::traverse_packet::OccluderCache) from one to the next.
+    /// The answers are [`Scene::occluded1`]'s.
+    ///
+    /// ```
+    /// # use raypack::{BuildOptions, Material, Ray, SceneBuilder, StreamOptions, Vec3};
+    /// let mut b = SceneBuilder::new();
+    /// let m = b.add_material(Material::default());
+    /// b.add_sphere(Vec3::ZERO, 1.0, m)?;
+    /// let (scene, _) = b.commit(&BuildOptions::default());
+    /// let rays: Vec<Ray> = (0..40).map(|i| Ray::segment(Vec3::new(i as f32 * 0.05 + 0.025, 0.0, 5.0), -Vec3::Z, 0.0, 10.0)).collect();
+    /// let mut blocked = vec![false; rays.len()];
+    /// scene.occluded_stream(&rays, &mut blocked, &StreamOptions::default());
+    /// assert_eq!(blocked.iter().filter(|&&b| b).count(), 20); // x < 1 passes through the sphere
+    /// # Ok::<(), raypack::SceneError>(())
+    /// ```
+    pub fn occluded_stream(&self, rays: &[Ray], occluded: &mut [bool], opts: &StreamOptions) {
+        self.counting(&mut NoCount).occluded_stream(rays, occluded, opts);
+    }
+
+    /// The queries of this scene that add the kernels' work to `counter` (for example a
+    /// [`crate::bvh::TraversalCounts`]); [`NoCount`] compiles away, and is what the
+    /// scene's own query methods use.
+    ///
+    /// ```
+    /// # use raypack::{BuildOptions, Material, Ray, SceneBuilder, TraversalCounts, Vec3};
+    /// let mut b = SceneBuilder::new();
+    /// let m = b.add_material(Material::default());
+    /// b.add_sphere(Vec3::ZERO, 1.0, m)?;
+    /// let (scene, _) = b.commit(&BuildOptions::default());
+    /// let ray = Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z);
+    /// let mut counts = TraversalCounts::default();
+    /// assert_eq!(scene.counting(&mut counts).intersect1(&ray), scene.intersect1(&ray));
+    /// assert!(counts.blocks >= 1); // the hit was found by testing a block
+    /// # Ok::<(), raypack::SceneError>(())
+    /// ```
+    pub fn counting<'a, C: Counter>(&'a self, counter: &'a mut C) -> Counting<'a, C> {
+        Counting { scene: self, counter }
     }
 
     /// Could any ray from `origin` along a positive multiple of a vector in the box
@@ -133,112 +239,64 @@ impl Scene {
     pub fn cone_may_hit(&self, origin: Vec3, dir_lo: Vec3, dir_hi: Vec3) -> bool {
         self.bvh8.cone_may_hit_with(self.isa, origin, dir_lo, dir_hi)
     }
+}
 
-    /// [`Scene::intersect_stream`] on the calling thread only.
-    pub fn intersect_batch(&self, rays: &[Ray], hits: &mut [Hit]) {
-        self.intersect_batch_counted(rays, hits, &mut NoCount);
+/// A scene's queries counting their work into a [`Counter`] ([`Scene::counting`]).
+pub struct Counting<'a, C> {
+    scene: &'a Scene,
+    counter: &'a mut C,
+}
+
+impl<C: Counter> Counting<'_, C> {
+    /// [`Scene::intersect1`], counted.
+    #[inline]
+    pub fn intersect1(&mut self, ray: &Ray) -> Hit {
+        let s = self.scene;
+        let mut hit = s.bvh8.intersect1_with(s.isa, ray, self.counter);
+        s.finish_hit(ray, &mut hit);
+        hit
     }
 
-    /// [`Scene::intersect_batch`], adding the kernels' work to `counter`.
-    pub fn intersect_batch_counted<C: Counter>(&self, rays: &[Ray], hits: &mut [Hit], counter: &mut C) {
-        self.intersect_batch_as(rays, hits, counter, self.bvh8.interleaves());
+    /// [`Scene::occluded1`], counted.
+    #[inline]
+    pub fn occluded1(&mut self, ray: &Ray) -> bool {
+        let s = self.scene;
+        s.bvh8.occluded1_with(s.isa, ray, self.counter)
     }
 
-    /// [`Scene::intersect_batch_counted`], interleaving the rays of incoherent packets when
-    /// `interleave` is set and as packets otherwise, whatever the BVH's size (the renderer's
-    /// choice, [`crate::render::trace`]).
-    pub(crate) fn intersect_batch_as<C: Counter>(
-        &self,
-        rays: &[Ray],
-        hits: &mut [Hit],
-        counter: &mut C,
-        interleave: bool,
-    ) {
-        self.bvh8.intersect_stream_as(self.isa, rays, hits, counter, interleave);
-        if self.has_spheres() {
-            for (ray, out) in rays.iter().zip(hits.iter_mut()) {
-                self.finish_hit(ray, out);
+    /// [`Scene::intersect_stream`], counted (on the pool, each chunk into a counter of its own,
+    /// added up).
+    pub fn intersect_stream(&mut self, rays: &[Ray], hits: &mut [Hit], opts: &StreamOptions)
+    where
+        C: Default + Send + std::ops::AddAssign,
+    {
+        assert_eq!(rays.len(), hits.len(), "one hit per ray");
+        let (scene, kernel) = (self.scene, opts.kernel);
+        let trace = |r: &[Ray], h: &mut [Hit], c: &mut C| {
+            scene.bvh8.intersect_stream_with(scene.isa, r, h, kernel, c);
+            if scene.has_spheres() {
+                for (ray, out) in r.iter().zip(h.iter_mut()) {
+                    scene.finish_hit(ray, out);
+                }
             }
+        };
+        match opts.threads {
+            Threads::Caller => trace(rays, hits, self.counter),
+            Threads::Pool => par_for_each_chunk(rays, hits, self.counter, trace),
         }
     }
 
-    /// Occlusion of `rays` into `occluded` (same length), over all rayon threads, as 16-ray
-    /// packets in the order given (see [`Scene::intersect_stream`]).
-    ///
-    /// ```
-    /// # use raypack::{BuildOptions, Material, Ray, SceneBuilder, Vec3};
-    /// let mut b = SceneBuilder::new();
-    /// let m = b.add_material(Material::default());
-    /// b.add_sphere(Vec3::ZERO, 1.0, m)?;
-    /// let (scene, _) = b.commit(&BuildOptions::default());
-    /// let rays: Vec<Ray> = (0..40).map(|i| Ray::segment(Vec3::new(i as f32 * 0.05 + 0.025, 0.0, 5.0), -Vec3::Z, 0.0, 10.0)).collect();
-    /// let mut blocked = vec![false; rays.len()];
-    /// scene.occluded_stream(&rays, &mut blocked);
-    /// assert_eq!(blocked.iter().filter(|&&b| b).count(), 20); // x < 1 passes through the sphere
-    /// # Ok::<(), raypack::SceneError>(())
-    /// ```
-    pub fn occluded_stream(&self, rays: &[Ray], occluded: &mut [bool]) {
+    /// [`Scene::occluded_stream`], counted.
+    pub fn occluded_stream(&mut self, rays: &[Ray], occluded: &mut [bool], opts: &StreamOptions)
+    where
+        C: Default + Send + std::ops::AddAssign,
+    {
         assert_eq!(rays.len(), occluded.len(), "one answer per ray");
-        rays.par_chunks(STREAM_CHUNK)
-            .zip(occluded.par_chunks_mut(STREAM_CHUNK))
-            .with_max_len(1)
-            .for_each(|(r, o)| self.occluded_batch(r, o));
-    }
-
-    /// Closest hits of `rays` into `hits` (same length) on the calling thread, traced as single
-    /// rays with several in flight at once, so that one ray's cache misses overlap the
-    /// others' steps ([`crate::bvh::traverse_interleaved`]): for incoherent rays (diffuse
-    /// bounces) in scenes whose BVH is larger than the last-level cache, where it is the
-    /// fastest of the queries; where the BVH fits the caches it is the slowest. The streams
-    /// ([`Scene::intersect_stream`]) trace the incoherent packets of such scenes this way by
-    /// themselves. The hits are [`Scene::intersect1`]'s.
-    ///
-    /// ```
-    /// # use raypack::{BuildOptions, Hit, Material, Ray, SceneBuilder, Vec3};
-    /// let mut b = SceneBuilder::new();
-    /// let m = b.add_material(Material::default());
-    /// b.add_sphere(Vec3::ZERO, 1.0, m)?;
-    /// let (scene, _) = b.commit(&BuildOptions::default());
-    /// let rays: Vec<Ray> = (0..100).map(|i| Ray::new(Vec3::ZERO, Vec3::new((i as f32).cos(), (i as f32).sin(), 0.3))).collect();
-    /// let mut hits = vec![Hit::MISS; rays.len()];
-    /// scene.intersect_interleaved(&rays, &mut hits);
-    /// assert!(rays.iter().zip(&hits).all(|(r, h)| *h == scene.intersect1(r)));
-    /// # Ok::<(), raypack::SceneError>(())
-    /// ```
-    pub fn intersect_interleaved(&self, rays: &[Ray], hits: &mut [Hit]) {
-        self.bvh8.intersect_interleaved_with(self.isa, rays, hits, &mut NoCount);
-        if self.has_spheres() {
-            for (ray, out) in rays.iter().zip(hits.iter_mut()) {
-                self.finish_hit(ray, out);
-            }
+        let (scene, kernel) = (self.scene, opts.kernel);
+        let trace = |r: &[Ray], o: &mut [bool], c: &mut C| scene.bvh8.occluded_stream_with(scene.isa, r, o, kernel, c);
+        match opts.threads {
+            Threads::Caller => trace(rays, occluded, self.counter),
+            Threads::Pool => par_for_each_chunk(rays, occluded, self.counter, trace),
         }
-    }
-
-    /// Which of `rays` are blocked over `[tnear, tfar]`, into `occluded` (same length), on the
-    /// calling thread, as single rays with several in flight at once (see
-    /// [`Scene::intersect_interleaved`]). The answers are [`Scene::occluded1`]'s.
-    pub fn occluded_interleaved(&self, rays: &[Ray], occluded: &mut [bool]) {
-        self.bvh8.occluded_interleaved_with(self.isa, rays, occluded, &mut NoCount);
-    }
-
-    /// [`Scene::occluded_stream`] on the calling thread only.
-    pub fn occluded_batch(&self, rays: &[Ray], occluded: &mut [bool]) {
-        self.occluded_batch_counted(rays, occluded, &mut NoCount);
-    }
-
-    /// [`Scene::occluded_batch`], adding the kernels' work to `counter`.
-    pub fn occluded_batch_counted<C: Counter>(&self, rays: &[Ray], occluded: &mut [bool], counter: &mut C) {
-        self.occluded_batch_as(rays, occluded, counter, self.bvh8.interleaves());
-    }
-
-    /// [`Scene::occluded_batch_counted`] with the choice of [`Scene::intersect_batch_as`].
-    pub(crate) fn occluded_batch_as<C: Counter>(
-        &self,
-        rays: &[Ray],
-        occluded: &mut [bool],
-        counter: &mut C,
-        interleave: bool,
-    ) {
-        self.bvh8.occluded_stream_as(self.isa, rays, occluded, counter, interleave);
     }
 }

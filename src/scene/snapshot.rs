@@ -453,8 +453,8 @@ mod tests {
             assert_eq!(back.bvh2.is_some(), watertight);
             let rays = crate::raysets::primary_for_scene(&s, 32, 24);
             let (mut a, mut b) = (vec![Hit::MISS; rays.len()], vec![Hit::MISS; rays.len()]);
-            s.intersect_stream(&rays, &mut a);
-            back.intersect_stream(&rays, &mut b);
+            s.intersect_stream(&rays, &mut a, &crate::StreamOptions::POOL);
+            back.intersect_stream(&rays, &mut b, &crate::StreamOptions::POOL);
             assert!(a.iter().zip(&b).all(|(x, y)| x.t.to_bits() == y.t.to_bits() && x.prim == y.prim));
             assert!(a.iter().any(Hit::is_hit));
             let _ = Ray::new(Vec3::ZERO, Vec3::X);

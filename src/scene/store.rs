@@ -2,7 +2,7 @@
 //!
 //! Primitive ids are scene-wide: triangles `0 .. num_triangles()`, then spheres.
 
-use crate::bvh::{Bvh2, Bvh8, BvhStats, Counter, NoCount, PrimShape};
+use crate::bvh::{Bvh2, Bvh8, BvhStats, NoCount, PrimShape};
 use crate::geometry::{
     MollerTrumboreKernel, TriangleKernel, TriangleTest, WatertightKernel, intersect_sphere, sphere::sphere_uv,
 };
@@ -340,7 +340,7 @@ impl Scene {
     /// let (scene, _) = b.commit(&BuildOptions::default());
     /// let rays = [Ray::new(Vec3::new(0.25, 0.25, 2.0), -Vec3::Z), Ray::new(Vec3::new(5.0, 0.0, 3.0), -Vec3::Z)];
     /// let mut hits = [Hit::MISS; 3]; // the last one stays a miss
-    /// scene.intersect_stream(&rays, &mut hits[..2]);
+    /// scene.intersect_stream(&rays, &mut hits[..2], &raypack::StreamOptions::POOL);
     /// scene.prefetch_hits(&hits); // misses and spheres are skipped
     /// let normals: Vec<Vec3> = rays.iter().zip(&hits).map(|(r, h)| scene.surface(r, h).geometric_normal).collect();
     /// assert_eq!(normals, [Vec3::Z, Vec3::Z]);
@@ -370,16 +370,7 @@ impl Scene {
     /// ```
     #[inline]
     pub fn intersect1(&self, ray: &Ray) -> Hit {
-        self.intersect1_counted(ray, &mut NoCount)
-    }
-
-    /// [`Scene::intersect1`], adding the kernel's work to `counter` (for example a
-    /// [`crate::bvh::TraversalCounts`]).
-    #[inline]
-    pub fn intersect1_counted<C: Counter>(&self, ray: &Ray, counter: &mut C) -> Hit {
-        let mut hit = self.bvh8.intersect1_with(self.isa, ray, counter);
-        self.finish_hit(ray, &mut hit);
-        hit
+        self.counting(&mut NoCount).intersect1(ray)
     }
 
     /// True when anything blocks `ray` over `[tnear, tfar]` (the BVH8 any-hit kernel).
@@ -398,13 +389,7 @@ impl Scene {
     /// ```
     #[inline]
     pub fn occluded1(&self, ray: &Ray) -> bool {
-        self.occluded1_counted(ray, &mut NoCount)
-    }
-
-    /// [`Scene::occluded1`], adding the kernel's work to `counter`.
-    #[inline]
-    pub fn occluded1_counted<C: Counter>(&self, ray: &Ray, counter: &mut C) -> bool {
-        self.bvh8.occluded1_with(self.isa, ray, counter)
+        self.counting(&mut NoCount).occluded1(ray)
     }
 
     /// Local geometry at `hit` (which must be a hit of `ray` on this scene).

@@ -13,7 +13,7 @@
 //! ```
 
 use raypack::raysets::{RaySet, bench_sets};
-use raypack::{BuildOptions, Hit};
+use raypack::{BuildOptions, Hit, StreamOptions};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -36,11 +36,11 @@ fn trace_packets(scene: &raypack::Scene, sets: &[RaySet]) -> u64 {
     for set in sets {
         if set.kind.is_occlusion() {
             let mut occ = vec![false; set.rays.len()];
-            scene.occluded_batch(&set.rays, &mut occ);
+            scene.occluded_stream(&set.rays, &mut occ, &StreamOptions::CALLER);
             sum += occ.iter().filter(|&&o| o).count() as u64;
         } else {
             let mut hits = vec![Hit::MISS; set.rays.len()];
-            scene.intersect_batch(&set.rays, &mut hits);
+            scene.intersect_stream(&set.rays, &mut hits, &StreamOptions::CALLER);
             sum += hits.iter().map(|h| h.prim as u64).sum::<u64>();
         }
     }

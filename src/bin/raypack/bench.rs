@@ -12,8 +12,8 @@ use crate::machine::{self, CpuTimes, Machine};
 use crate::say;
 use crate::{BenchArgs, CliError, check_memory, load, print_warnings};
 #[cfg(feature = "embree")]
-use raypack::methods::embree_methods;
-use raypack::methods::{Method, output_for, raypack_methods_named, trace};
+use raypack::kernels::embree_methods;
+use raypack::kernels::{Method, Results, raypack_methods_named, trace};
 use raypack::raysets::{self, Checksum};
 use raypack::{BuildOptions, SceneBuilder};
 use raypack::{Isa, Scene};
@@ -464,7 +464,7 @@ pub fn run_bench(
         let occlusion = set.kind.is_occlusion();
         let reference =
             methods.iter().find(|m| m.run.is_occlusion() == occlusion).expect("KERNELS has a kernel of each query");
-        let mut ref_out = output_for(&reference.run, set.rays.len());
+        let mut ref_out = Results::for_run(&reference.run, set.rays.len());
         trace(&reference.run, &set.rays, &mut ref_out);
         let ref_sum = ref_out.checksum(&set.rays);
         for &t in &settings.threads {
@@ -482,7 +482,7 @@ pub fn run_bench(
             let chosen: Vec<&Method<'_>> =
                 methods.iter().filter(|m| m.run.is_occlusion() == occlusion).filter(wanted).collect();
             // One output buffer for all methods; each checksum is taken from the warm-up.
-            let mut out = output_for(&reference.run, set.rays.len());
+            let mut out = Results::for_run(&reference.run, set.rays.len());
             let mut times: Vec<Vec<Duration>> = vec![Vec::with_capacity(settings.runs); chosen.len()];
             let (reps, checksums): (Vec<usize>, Vec<Checksum>) = pool.install(|| {
                 chosen
@@ -934,7 +934,7 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     // `-t N` is checked as on every command; in `--threads-list`, 0 means all cores.
     crate::machine::check_threads(a.threads)?;
     for &t in a.threads_list.iter().filter(|&&t| t > 0) {
-        raypack::methods::check_threads(t).map_err(|e| CliError::Usage(format!("--threads-list {t}: {e}")))?;
+        raypack::system::check_threads(t).map_err(|e| CliError::Usage(format!("--threads-list {t}: {e}")))?;
     }
     let threads = match (a.threads, a.threads_list.is_empty()) {
         (Some(t), _) => vec![t],

@@ -58,12 +58,12 @@ pub fn machine() -> Machine {
 }
 
 /// Checks a `-t N` flag (`None`: all cores): at least 1, at most
-/// [`raypack::methods::max_threads`].
+/// [`raypack::system::max_threads`].
 pub(crate) fn check_threads(threads: Option<usize>) -> Result<(), crate::CliError> {
     match threads {
         Some(0) => Err(crate::CliError::Usage("-t 0: need at least one thread".into())),
         Some(t) => {
-            raypack::methods::check_threads(t).map(|_| ()).map_err(|e| crate::CliError::Usage(format!("-t {t}: {e}")))
+            raypack::system::check_threads(t).map(|_| ()).map_err(|e| crate::CliError::Usage(format!("-t {t}: {e}")))
         }
         None => Ok(()),
     }
