@@ -57,6 +57,8 @@
 //! ```
 #![deny(missing_docs)]
 
+#[cfg(feature = "bench")]
+pub mod bench;
 pub mod bvh;
 #[cfg(feature = "embree")]
 pub mod embree;

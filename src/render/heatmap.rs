@@ -2,7 +2,7 @@
 //!
 //! One ray per pixel, through the pixel's centre, traced by the single-ray kernels that
 //! answer [`Scene::intersect1`] and [`Scene::occluded1`], each with its own
-//! [`TraversalCounts`] ([`Scene::intersect1_counted`], [`Scene::occluded1_counted`]). The
+//! [`TraversalCounts`] ([`Scene::counting`]: its `intersect1`, `occluded1`). The
 //! counts are therefore the real kernel's work, not a separate walk that could drift from it:
 //! `nodes` is [`TraversalCounts::nodes`] (inner nodes visited, each an 8-box test) and `tests`
 //! is [`TraversalCounts::blocks`] (primitive blocks tested, each up to M triangles or 4

@@ -143,8 +143,8 @@ impl RayLog {
 }
 
 /// Mean intersection tests per ray of `kind` over `rays`, counted by the 8-wide BVH kernels
-/// themselves ([`Scene::intersect1_counted`] for camera and bounce rays,
-/// [`Scene::occluded1_counted`] for shadow rays): node tests (each one ray against 8 boxes)
+/// themselves ([`Scene::counting`]: `intersect1` for camera and bounce rays,
+/// `occluded1` for shadow rays): node tests (each one ray against 8 boxes)
 /// plus primitive-block tests, [`TraversalCounts::tests`]. With brute force every primitive is
 /// one test. `None` without rays.
 pub fn tests_per_ray(scene: &Scene, rays: &[Ray], kind: RayKind, brute_force: bool) -> Option<f64> {

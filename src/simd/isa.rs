@@ -189,7 +189,7 @@ pub trait IsaLanes: Copy + Send + Sync + 'static {
     type F8: Transpose8;
     /// 16 lanes (16-ray packets).
     type F16: Lanes;
-    /// The packet lanes of the stream queries ([`crate::Scene::intersect_batch`] and kin):
+    /// The packet lanes of the stream queries ([`crate::Scene::intersect_stream`] and kin):
     /// `F16` or `F8`, whichever traces faster on this tier (see [`crate::bvh::queries`]).
     type Stream: Lanes;
 }

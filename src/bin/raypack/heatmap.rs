@@ -52,7 +52,7 @@ pub(crate) fn cmd_heatmap(a: RenderArgs) -> Result<(), CliError> {
     if a.brute_force {
         return Err(CliError::Usage("--integrator heatmap counts BVH traversal: --brute-force has none".into()));
     }
-    crate::machine::check_threads(a.threads)?;
+    crate::check_threads(a.threads)?;
     let output = a.output.clone().unwrap_or_else(|| {
         let stem = a.scene.as_ref().and_then(|s| s.file_stem()).map(|s| s.to_string_lossy().into_owned());
         PathBuf::from(format!("{}-heatmap.png", stem.as_deref().unwrap_or("cornell")))

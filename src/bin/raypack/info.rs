@@ -443,7 +443,7 @@ impl SceneInfo {
 
 /// `raypack info`: the figures of [`scene_info`] as text or JSON.
 pub(crate) fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
-    crate::machine::check_threads(a.threads)?;
+    crate::check_threads(a.threads)?;
     let mut opts = InfoOptions {
         load: raypack::io::LoadOptions { max_primitives: a.max_primitives, memory_cap: true },
         cache_dir: a.bvh_cache.clone(),

@@ -6,7 +6,6 @@
 mod bench;
 mod heatmap;
 mod info;
-mod machine;
 mod merge;
 mod rays;
 mod render;
@@ -305,6 +304,16 @@ fn quality_parser() -> impl clap::builder::TypedValueParser<Value = BuildQuality
         .try_map(|s| s.parse::<BuildQuality>())
 }
 
+/// Checks a `-t N` flag (`None`: all cores): at least 1, at most
+/// [`raypack::system::max_threads`].
+fn check_threads(threads: Option<usize>) -> Result<(), CliError> {
+    match threads {
+        Some(0) => Err(CliError::Usage("-t 0: need at least one thread".into())),
+        Some(t) => raypack::system::check_threads(t).map(|_| ()).map_err(|e| CliError::Usage(format!("-t {t}: {e}"))),
+        None => Ok(()),
+    }
+}
+
 #[derive(Args)]
 struct InfoArgs {
     /// Scene file (.dae, .obj, .ply); omit for the built-in Cornell box.
@@ -384,7 +393,7 @@ impl InfoArgs {
 }
 
 /// Parses `-t`: one thread count, the same on every command (a list is `bench
-/// --threads-list`'s; the limits are checked by [`machine::check_threads`]).
+/// --threads-list`'s; the limits are checked by [`check_threads`]).
 fn parse_thread_count(s: &str) -> Result<usize, String> {
     if s.contains(',') {
         return Err(format!("-t takes one thread count; to time `bench` at several, use --threads-list {s}"));
@@ -415,7 +424,7 @@ enum CliError {
     #[error(transparent)]
     Image(#[from] ImageError),
     #[error(transparent)]
-    Bench(#[from] bench::BenchError),
+    Bench(#[from] raypack::bench::BenchError),
     #[error(transparent)]
     Output(#[from] raypack::fs::output::OutputError),
     #[error(transparent)]

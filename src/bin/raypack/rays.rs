@@ -1,10 +1,10 @@
 //! `raypack bench --rays FILE` and `--dump-rays DIR`: the ray sets a benchmark times, read
 //! from or written to ray files ([`raypack::io::rays`]).
 
-use crate::bench::BenchSettings;
 use crate::say;
 use crate::{BenchArgs, CliError};
 use raypack::Scene;
+use raypack::bench::BenchSettings;
 use raypack::io::rays::{read_rays, write_rays};
 use raypack::raysets::{self, RaySet, RaySetKind};
 

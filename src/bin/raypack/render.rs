@@ -34,7 +34,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             return Err(CliError::Usage(format!("-a {v:?}: expected a whole batch size >= 1 and a tolerance > 0")));
         }
     };
-    crate::machine::check_threads(a.threads)?;
+    crate::check_threads(a.threads)?;
     let view = CameraFlags::parse(&a)?;
     let quiet = a.quiet;
     // Values raised to the least that works, said aloud (a warning, not a silent change).

@@ -57,18 +57,6 @@ pub fn machine() -> Machine {
     }
 }
 
-/// Checks a `-t N` flag (`None`: all cores): at least 1, at most
-/// [`raypack::system::max_threads`].
-pub(crate) fn check_threads(threads: Option<usize>) -> Result<(), crate::CliError> {
-    match threads {
-        Some(0) => Err(crate::CliError::Usage("-t 0: need at least one thread".into())),
-        Some(t) => {
-            raypack::system::check_threads(t).map(|_| ()).map_err(|e| crate::CliError::Usage(format!("-t {t}: {e}")))
-        }
-        None => Ok(()),
-    }
-}
-
 /// The 1-, 5- and 15-minute load averages (`/proc/loadavg`).
 pub fn load_average() -> Option<[f64; 3]> {
     parse_loadavg(&std::fs::read_to_string("/proc/loadavg").ok()?)
