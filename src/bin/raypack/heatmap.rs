@@ -76,7 +76,7 @@ pub(crate) fn cmd_heatmap(a: RenderArgs) -> Result<(), CliError> {
         let file_camera = a.camera.as_deref().map(raypack::io::camera_file::load_camera_file).transpose()?;
         let (builder, warnings) = load(a.scene.as_deref(), a.max_primitives)?;
         print_warnings(&warnings);
-        let opts = BuildOptions { quality: a.quality.into(), watertight: a.watertight, ..BuildOptions::default() };
+        let opts = BuildOptions { quality: a.quality, watertight: a.watertight, ..BuildOptions::default() };
         let mut scene = commit(builder, &opts, a.bvh_cache.as_deref(), a.quiet);
         if let Some(isa) = a.isa {
             scene.set_isa(isa).map_err(|e| CliError::Usage(e.to_string()))?;
