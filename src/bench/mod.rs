@@ -155,7 +155,7 @@ pub struct BenchRow {
 /// a shared edge or vertex can hit with one tracer and slip through with the other (on a 2M
 /// triangle knot, Embree's shadow rays differed on 2 of 137,095 rays, 1.5e-5). A broken
 /// comparison (another scene, wrong rays) differs on far more.
-const HIT_TOLERANCE: f64 = 1e-4;
+pub const HIT_TOLERANCE: f64 = 1e-4;
 
 /// Everything a bench run measured.
 #[derive(Clone, Debug, PartialEq)]
