@@ -182,7 +182,7 @@ trait StreamQuery {
     /// Traces packet `p` and writes its answers into `out` (one per ray of `p`).
     fn packet<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
         bvh: &Bvh8Ref<'_, T>,
-        p: PacketRays<I::Stream>,
+        p: &mut PacketRays<I::Stream>,
         carry: &mut Self::Carry,
         out: &mut [Self::Out],
         counter: &mut C,
@@ -208,13 +208,13 @@ impl StreamQuery for Closest {
     #[inline(always)]
     fn packet<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
         bvh: &Bvh8Ref<'_, T>,
-        mut p: PacketRays<I::Stream>,
+        p: &mut PacketRays<I::Stream>,
         _: &mut (),
         out: &mut [Hit],
         counter: &mut C,
     ) {
-        intersect_hybrid::<_, I, T, P, C>(bvh, &mut p, HYBRID_THRESHOLD, counter);
-        store_stream_hits(&p, out);
+        intersect_hybrid::<_, I, T, P, C>(bvh, p, HYBRID_THRESHOLD, counter);
+        store_stream_hits(p, out);
     }
 
     #[inline(always)]
@@ -239,12 +239,12 @@ impl StreamQuery for AnyHit {
     #[inline(always)]
     fn packet<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
         bvh: &Bvh8Ref<'_, T>,
-        p: PacketRays<I::Stream>,
+        p: &mut PacketRays<I::Stream>,
         cache: &mut OccluderCache,
         out: &mut [bool],
         counter: &mut C,
     ) {
-        let bits = occluded_hybrid::<_, I, T, P, C>(bvh, &p, HYBRID_THRESHOLD, cache, counter);
+        let bits = occluded_hybrid::<_, I, T, P, C>(bvh, p, HYBRID_THRESHOLD, cache, counter);
         for (i, x) in out.iter_mut().enumerate() {
             *x = bits >> i & 1 != 0;
         }
@@ -283,20 +283,22 @@ impl<T: TriBlock, C: Counter, Q: StreamQuery, const SET_ASIDE: bool> IsaOp for S
         let k = I::Stream::LANES;
         let (bvh, rays) = (self.bvh.slices(), self.rays);
         let mut carry = Q::Carry::default();
+        // One length check here, so that `out[batch]` below needs none.
+        let out = &mut self.out[..rays.len()];
         with_kernel!(bvh.test, P => {
             let mut at = self.from;
             while at < rays.len() {
                 let batch = at..rays.len().min(at + k);
                 at = batch.end;
                 prefetch_rays(rays, at + k, k);
-                let p = PacketRays::<I::Stream>::new_in::<I::F8>(&rays[batch.clone()], u32::MAX);
+                let mut p = PacketRays::<I::Stream>::new_in::<I::F8>(&rays[batch.clone()], u32::MAX);
                 if SET_ASIDE && incoherent_packet(&p) {
                     if self.pending.add(batch) {
                         break;
                     }
                     continue;
                 }
-                Q::packet::<I, T, P, C>(&bvh, p, &mut carry, &mut self.out[batch], self.counter);
+                Q::packet::<I, T, P, C>(&bvh, &mut p, &mut carry, &mut out[batch], self.counter);
             }
             at
         })
