@@ -58,20 +58,20 @@ fn fits(names: &str, width: usize, height: usize, needed: u64, per_pixel: u64) -
 }
 
 /// Reads a `threads=` argument: `None` (all cores) or an int from 1 to
-/// [`raypack::methods::max_threads`]. Anything else is an error naming the argument and the
+/// [`raypack::system::max_threads`]. Anything else is an error naming the argument and the
 /// range (a `TypeError` for a value that is not an int), never the int conversion's bare
 /// `OverflowError`.
 pub fn threads(value: &Bound<'_, PyAny>) -> PyResult<Option<usize>> {
     if value.is_none() {
         return Ok(None);
     }
-    let max = raypack::methods::max_threads();
+    let max = raypack::system::max_threads();
     let message = || {
         let shown = value.repr().map_or_else(|_| "?".to_string(), |r| r.to_string());
         format!(
             "threads: expected None (all cores) or 1 to {max} threads ({} per logical CPU; this machine has {}), got {shown}",
-            raypack::methods::THREADS_PER_CPU,
-            max / raypack::methods::THREADS_PER_CPU
+            raypack::system::THREADS_PER_CPU,
+            max / raypack::system::THREADS_PER_CPU
         )
     };
     if value.is_instance_of::<pyo3::types::PyBool>() || !value.is_instance_of::<pyo3::types::PyInt>() {
