@@ -286,13 +286,22 @@ impl<T: TriBlock, C: Counter, Q: StreamQuery, const SET_ASIDE: bool> IsaOp for S
         // One length check here, so that `out[batch]` below needs none.
         let out = &mut self.out[..rays.len()];
         with_kernel!(bvh.test, P => {
+            if !SET_ASIDE {
+                // The packet-only stream: chunks of the slices, without index checks.
+                for (n, (r, o)) in rays[self.from..].chunks(k).zip(out[self.from..].chunks_mut(k)).enumerate() {
+                    prefetch_rays(rays, self.from + (n + 2) * k, k);
+                    let mut p = PacketRays::<I::Stream>::new_in::<I::F8>(r, u32::MAX);
+                    Q::packet::<I, T, P, C>(&bvh, &mut p, &mut carry, o, self.counter);
+                }
+                return rays.len();
+            }
             let mut at = self.from;
             while at < rays.len() {
                 let batch = at..rays.len().min(at + k);
                 at = batch.end;
                 prefetch_rays(rays, at + k, k);
                 let mut p = PacketRays::<I::Stream>::new_in::<I::F8>(&rays[batch.clone()], u32::MAX);
-                if SET_ASIDE && incoherent_packet(&p) {
+                if incoherent_packet(&p) {
                     if self.pending.add(batch) {
                         break;
                     }
