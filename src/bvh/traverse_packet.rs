@@ -45,12 +45,12 @@ use crate::bvh::bvh8::Bvh8Ref;
 use crate::bvh::counters::{Counter, Work};
 use crate::bvh::frustum::Frustum;
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
-use crate::bvh::stack::{TraversalStack, stack_storage};
 use crate::bvh::traverse1::{Ray1, safe_recip_lanes};
 use crate::geometry::sphere_block::sphere_lanes;
 use crate::geometry::{TriBlock, TriangleKernel, TriangleTest};
 use crate::ray::{Hit, Ray};
 use crate::simd::{IsaLanes, Lanes, Transpose8, Vec3x};
+use std::mem::MaybeUninit;
 
 /// K rays in lane form with their running closest hits.
 #[derive(Clone, Copy, Debug)]
@@ -324,9 +324,13 @@ pub fn intersect_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C
     // they go on alone sooner (Embree's incoherent switch threshold is higher too).
     let threshold = if frustum.is_none() { threshold.max(incoherent_threshold::<V, I>()) } else { threshold };
     let inf = V::splat(f32::INFINITY);
-    // Entries: the subtree, the lanes that want it, a lower bound of their entry distances.
-    let mut items = stack_storage::<(NodeRef, u32, f32), BVH8_STACK>();
-    let mut stack = TraversalStack::new(&mut items);
+    // The one exception to `bvh::stack::TraversalStack`: the packet kernels keep three
+    // parallel arrays (node, lane mask, distance), which the 16-lane streams trace faster
+    // with (PERFORMANCE.md, "One single-ray skeleton and one stack").
+    let mut refs = [const { MaybeUninit::<NodeRef>::uninit() }; BVH8_STACK];
+    let mut masks = [const { MaybeUninit::<u32>::uninit() }; BVH8_STACK];
+    let mut dists = [const { MaybeUninit::<f32>::uninit() }; BVH8_STACK];
+    let mut sp = 0usize;
     let mut cur = bvh.root();
     let mut active = all;
     loop {
@@ -361,7 +365,7 @@ pub fn intersect_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C
             let mut next = NodeRef::EMPTY;
             let mut next_active = 0;
             let mut next_dist = f32::INFINITY;
-            let base = stack.len();
+            let base = sp;
             for i in crate::simd::bits(candidates) {
                 let (m, tn) = rays.intersect_box(node, i);
                 let mb = m.bitmask() & active;
@@ -385,22 +389,40 @@ pub fn intersect_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C
                 } else {
                     (child, mb, d)
                 };
-                stack.push((push_ref, push_mask, push_dist));
+                refs[sp] = MaybeUninit::new(push_ref);
+                masks[sp] = MaybeUninit::new(push_mask);
+                dists[sp] = MaybeUninit::new(push_dist);
+                sp += 1;
             }
             if next.is_empty() {
                 break 'descend;
             }
-            // Nearest of the pushed entries on top (at most 7 entries).
-            stack.sort_from_by_decreasing_distance(base);
+            // Nearest of the pushed entries on top (insertion sort, at most 7 entries).
+            for i in base + 1..sp {
+                // SAFETY: entries base..sp were written above.
+                let (r, m, d) = unsafe { (refs[i].assume_init(), masks[i].assume_init(), dists[i].assume_init()) };
+                let mut j = i;
+                // SAFETY: base <= j - 1 < sp, written above.
+                while j > base && unsafe { dists[j - 1].assume_init() } < d {
+                    refs[j] = refs[j - 1];
+                    masks[j] = masks[j - 1];
+                    dists[j] = dists[j - 1];
+                    j -= 1;
+                }
+                refs[j] = MaybeUninit::new(r);
+                masks[j] = MaybeUninit::new(m);
+                dists[j] = MaybeUninit::new(d);
+            }
             cur = next;
             active = next_active;
         }
-        // The empty stack first, the end of every packet: the loop's set-up is for the others.
-        if stack.len() == 0 {
-            return;
-        }
         loop {
-            let Some((r, m, d)) = stack.pop() else { return };
+            if sp == 0 {
+                return;
+            }
+            sp -= 1;
+            // SAFETY: entries below sp were written by pushes.
+            let (r, m, d) = unsafe { (refs[sp].assume_init(), masks[sp].assume_init(), dists[sp].assume_init()) };
             let m = m & V::splat(d).le(rays.tfar).bitmask();
             if m != 0 {
                 cur = r;
@@ -485,9 +507,9 @@ pub fn occluded_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C:
         }
     }
     let frustum = Frustum::<I::F8>::new(&rays.org, &rays.inv, rays.tnear, rays.tfar, rays.active);
-    // Entries: the subtree and the lanes that want it.
-    let mut items = stack_storage::<(NodeRef, u32), BVH8_STACK>();
-    let mut stack = TraversalStack::new(&mut items);
+    let mut refs = [const { MaybeUninit::<NodeRef>::uninit() }; BVH8_STACK];
+    let mut masks = [const { MaybeUninit::<u32>::uninit() }; BVH8_STACK];
+    let mut sp = 0usize;
     let mut cur = bvh.root();
     let mut active = all & !occluded;
     loop {
@@ -529,7 +551,9 @@ pub fn occluded_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C:
                     continue;
                 }
                 if !next.is_empty() {
-                    stack.push((next, next_active));
+                    refs[sp] = MaybeUninit::new(next);
+                    masks[sp] = MaybeUninit::new(next_active);
+                    sp += 1;
                 }
                 next = child;
                 next_active = m;
@@ -563,11 +587,13 @@ pub fn occluded_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C:
         if all & !occluded == 0 {
             return occluded;
         }
-        if stack.len() == 0 {
-            return occluded;
-        }
         loop {
-            let Some((r, m)) = stack.pop() else { return occluded };
+            if sp == 0 {
+                return occluded;
+            }
+            sp -= 1;
+            // SAFETY: entries below sp were written by pushes.
+            let (r, m) = unsafe { (refs[sp].assume_init(), masks[sp].assume_init()) };
             let m = m & !occluded;
             if m != 0 {
                 cur = r;
