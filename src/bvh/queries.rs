@@ -590,10 +590,9 @@ mod tests {
     use super::{StreamKernel, incoherent_packet};
     use crate::bvh::NoCount;
     use crate::bvh::traverse_packet::PacketRays;
-    use crate::generate::random_soup;
     use crate::rng::Rng;
     use crate::simd::F32x16;
-    use crate::{BuildOptions, Hit, Isa, Material, Ray, SceneBuilder, Vec3};
+    use crate::{Hit, Isa, Ray, Vec3};
 
     /// Packets of 16 rays, alternately coherent (one origin, directions in a narrow cone, as
     /// camera rays) and incoherent (origins and directions at random, as diffuse bounces).
@@ -631,12 +630,7 @@ mod tests {
     /// over more incoherent packets than are set aside at once.
     #[test]
     fn interleaving_streams_answer_as_single_rays() {
-        let mesh = random_soup(3000, 0.2, 11);
-        let mut b = SceneBuilder::new();
-        let m = b.add_material(Material::default());
-        b.add_mesh(&mesh.positions, &mesh.indices, m).unwrap();
-        b.add_sphere(Vec3::new(0.5, 0.5, 0.5), 0.3, m).unwrap();
-        let (scene, _) = b.commit(&BuildOptions::default());
+        let scene = crate::testing::soup_and_sphere(11);
         let bvh = scene.bvh8();
         let mut rays = mixed_packets(2 * super::PENDING_RUNS + 37);
         rays.truncate(rays.len() - 5);

@@ -150,10 +150,10 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
 
 #[cfg(test)]
 mod tests {
+    use crate::bvh::StreamKernel;
     use crate::bvh::TraversalCounts;
-    use crate::generate::random_soup;
     use crate::rng::Rng;
-    use crate::{BuildOptions, Isa, Material, Ray, SceneBuilder, Vec3};
+    use crate::{Isa, Ray, Vec3};
 
     /// The interleaved kernels take each ray through the single-ray kernels' steps, whatever
     /// the other flights do: the same answers and the same work (nodes, leaves, blocks) as
@@ -162,12 +162,7 @@ mod tests {
     /// must not pop.
     #[test]
     fn interleaved_kernels_take_the_single_ray_kernels_steps() {
-        let mesh = random_soup(3000, 0.2, 5);
-        let mut b = SceneBuilder::new();
-        let m = b.add_material(Material::default());
-        b.add_mesh(&mesh.positions, &mesh.indices, m).unwrap();
-        b.add_sphere(Vec3::new(0.5, 0.5, 0.5), 0.3, m).unwrap();
-        let (scene, _) = b.commit(&BuildOptions::default());
+        let scene = crate::testing::soup_and_sphere(5);
         let bvh = scene.bvh8();
         let mut rng = Rng::new(8, 2);
         let mut r3 = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 - 1.0;
@@ -178,7 +173,7 @@ mod tests {
         for isa in Isa::available() {
             let (mut single, mut flights) = (TraversalCounts::default(), TraversalCounts::default());
             let mut blocked = vec![true; rays.len()];
-            bvh.occluded_interleaved_with(isa, &rays, &mut blocked, &mut flights);
+            bvh.occluded_stream_with(isa, &rays, &mut blocked, StreamKernel::Interleaved, &mut flights);
             let want: Vec<bool> = rays.iter().map(|r| bvh.occluded1_with(isa, r, &mut single)).collect();
             assert_eq!(blocked, want, "{isa}");
             assert_eq!(flights, single, "{isa}: occlusion work");
@@ -187,7 +182,7 @@ mod tests {
 
             let (mut single, mut flights) = (TraversalCounts::default(), TraversalCounts::default());
             let mut hits = vec![crate::Hit::MISS; rays.len()];
-            bvh.intersect_interleaved_with(isa, &rays, &mut hits, &mut flights);
+            bvh.intersect_stream_with(isa, &rays, &mut hits, StreamKernel::Interleaved, &mut flights);
             for (i, r) in rays.iter().enumerate() {
                 let want = bvh.intersect1_with(isa, r, &mut single);
                 assert_eq!((hits[i].t.to_bits(), hits[i].prim), (want.t.to_bits(), want.prim), "{isa} ray {i}");
