@@ -1,7 +1,8 @@
 //! The parallel loops behind `Scene.intersect` / `occluded`: rays are copied from the numpy
 //! arrays a pass at a time with the GIL held ([`passes`]: no whole copy of the rays, and no
 //! Python thread can free an array while it is read), traced with the GIL released by the
-//! scene's streams (`Scene::intersect_stream` / `occluded_stream`) and written
+//! scene's streams (`Scene::intersect_stream` / `occluded_stream`, chunk by chunk over the
+//! library's one parallel loop, `par_for_each_chunk_of`) and written
 //! straight into the output arrays (which no Python code can reach before they are returned).
 
 use crate::args::RayArgs;
@@ -9,6 +10,8 @@ use crate::{PoolCache, run_detached};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use rayon::prelude::*;
+use raypack::bvh::NoCount;
+use raypack::scene::par_for_each_chunk_of;
 use raypack::{Hit, Ray, Scene, StreamOptions, Vec3};
 
 /// Rays per rayon task (the library's own streams').
@@ -119,41 +122,40 @@ impl Target<'_> {
     }
 }
 
-/// Closest hits of `rays` into `out` (misses: `t = inf`, `prim = -1`, `u = v = 0`, normal 0).
+/// Closest hits of `rays` into `out` (misses: `t = inf`, `prim = -1`, `u = v = 0`, normal 0),
+/// chunk by chunk over the current pool: each chunk's stream on its thread, then its outputs.
 pub fn intersect(target: Target<'_>, rays: &[Ray], out: HitArrays<'_>) {
     let HitArrays { t, prim, u, v, normal } = out;
-    (t.par_chunks_mut(CHUNK), prim.par_chunks_mut(CHUNK), u.par_chunks_mut(CHUNK), v.par_chunks_mut(CHUNK))
-        .into_par_iter()
-        .zip(normal.par_chunks_mut(3 * CHUNK))
-        .zip(rays.par_chunks(CHUNK))
-        .for_each_init(
-            // A whole-chunk buffer, filled anew by every chunk (the stream writes every hit).
-            || vec![Hit::MISS; CHUNK],
-            |hit_buf, (((t, prim, u, v), normal), ray_buf)| {
-                let hit_buf = &mut hit_buf[..ray_buf.len()];
-                target.scene.intersect_stream(ray_buf, hit_buf, &StreamOptions::CALLER);
-                // The normals below read each hit triangle's corners: fetched for the whole
-                // chunk first (PERFORMANCE.md, "Hit geometry prefetch").
-                target.scene.prefetch_hits(hit_buf);
-                let outs = t
-                    .iter_mut()
-                    .zip(prim.iter_mut())
-                    .zip(u.iter_mut())
-                    .zip(v.iter_mut())
-                    .zip(normal.chunks_exact_mut(3));
-                for (((((t, prim), u), v), normal), (ray, hit)) in outs.zip(ray_buf.iter().zip(hit_buf.iter())) {
-                    *t = hit.t; // inf on a miss
-                    if hit.is_hit() {
-                        (*u, *v) = (hit.u, hit.v);
-                        *prim = target.caller_prim(hit.prim);
-                        normal.copy_from_slice(&target.normal(ray, hit).to_array());
-                    } else {
-                        (*u, *v, *prim) = (0.0, 0.0, -1);
-                        normal.fill(0.0);
-                    }
-                }
-            },
-        );
+    let outs = (
+        t.par_chunks_mut(CHUNK),
+        prim.par_chunks_mut(CHUNK),
+        u.par_chunks_mut(CHUNK),
+        v.par_chunks_mut(CHUNK),
+        normal.par_chunks_mut(3 * CHUNK),
+    )
+        .into_par_iter();
+    par_for_each_chunk_of(rays, outs, &mut NoCount, |ray_buf, (t, prim, u, v, normal), _| {
+        // The stream writes every hit of the chunk.
+        let mut hit_buf = [Hit::MISS; CHUNK];
+        let hit_buf = &mut hit_buf[..ray_buf.len()];
+        target.scene.intersect_stream(ray_buf, hit_buf, &StreamOptions::CALLER);
+        // The normals below read each hit triangle's corners: fetched for the whole chunk
+        // first (PERFORMANCE.md, "Hit geometry prefetch").
+        target.scene.prefetch_hits(hit_buf);
+        let outs =
+            t.iter_mut().zip(prim.iter_mut()).zip(u.iter_mut()).zip(v.iter_mut()).zip(normal.chunks_exact_mut(3));
+        for (((((t, prim), u), v), normal), (ray, hit)) in outs.zip(ray_buf.iter().zip(hit_buf.iter())) {
+            *t = hit.t; // inf on a miss
+            if hit.is_hit() {
+                (*u, *v) = (hit.u, hit.v);
+                *prim = target.caller_prim(hit.prim);
+                normal.copy_from_slice(&target.normal(ray, hit).to_array());
+            } else {
+                (*u, *v, *prim) = (0.0, 0.0, -1);
+                normal.fill(0.0);
+            }
+        }
+    });
 }
 
 /// Whether anything blocks each of `rays` over `[tnear, tfar]`, into `out`.
@@ -187,57 +189,53 @@ impl AllHits {
 /// (a distance) behind a hit, such as the neighbour of a shared edge, are not reported twice.
 /// Ordered by ray, then `t`.
 pub fn intersect_all(target: Target<'_>, rays: &[Ray], first: usize, max_hits: usize, min_step: f32) -> AllHits {
-    let parts: Vec<AllHits> = rays
-        .par_chunks(CHUNK)
-        .enumerate()
-        .map(|(k, chunk)| {
-            let start = first + k * CHUNK;
-            // Every hit as (ray within the chunk, hit), pass by pass: nearest first per ray.
-            let mut hits: Vec<(u32, Hit)> = Vec::new();
-            // The rays still going, as (index within the chunk, ray).
-            let mut live: Vec<(u32, Ray)> = chunk.iter().enumerate().map(|(i, r)| (i as u32, *r)).collect();
-            let mut batch: Vec<Ray> = Vec::with_capacity(live.len());
-            let mut found: Vec<Hit> = Vec::with_capacity(live.len());
-            for _ in 0..max_hits {
-                if live.is_empty() {
-                    break;
-                }
-                batch.clear();
-                batch.extend(live.iter().map(|(_, r)| *r));
-                found.clear();
-                found.resize(batch.len(), Hit::MISS);
-                target.scene.intersect_stream(&batch, &mut found, &StreamOptions::CALLER);
-                let mut next = 0;
-                for idx in 0..live.len() {
-                    let hit = found[idx];
-                    if !hit.is_hit() {
-                        continue;
-                    }
-                    let (j, mut ray) = live[idx];
-                    hits.push((j, hit));
-                    let step = min_step / ray.dir.length();
-                    // At least the next float above t: the interval [tnear, tfar] holds tnear.
-                    ray.tnear = (hit.t + step).max(hit.t.next_up());
-                    if ray.tnear.is_finite() && ray.tnear <= ray.tfar {
-                        live[next] = (j, ray);
-                        next += 1;
-                    }
-                }
-                live.truncate(next);
+    let mut parts: Vec<AllHits> = (0..rays.len().div_ceil(CHUNK)).map(|_| AllHits::default()).collect();
+    // Chunk by chunk: a chunk's rounds run on its rays alone, which stay in the cache.
+    par_for_each_chunk_of(rays, parts.par_iter_mut().enumerate(), &mut NoCount, |chunk, (k, out), _| {
+        let start = first + k * CHUNK;
+        // Every hit as (ray within the chunk, hit), pass by pass: nearest first per ray.
+        let mut hits: Vec<(u32, Hit)> = Vec::new();
+        // The rays still going, as (index within the chunk, ray).
+        let mut live: Vec<(u32, Ray)> = chunk.iter().enumerate().map(|(i, r)| (i as u32, *r)).collect();
+        let mut batch: Vec<Ray> = Vec::with_capacity(live.len());
+        let mut found: Vec<Hit> = Vec::with_capacity(live.len());
+        for _ in 0..max_hits {
+            if live.is_empty() {
+                break;
             }
-            // Ray-major; the stable sort keeps each ray's hits nearest first.
-            hits.sort_by_key(|&(j, _)| j);
-            let mut out = AllHits::default();
-            for (j, h) in hits {
-                out.ray.push((start + j as usize) as i64);
-                out.prim.push(target.caller_prim(h.prim));
-                out.t.push(h.t);
-                out.u.push(h.u);
-                out.v.push(h.v);
+            batch.clear();
+            batch.extend(live.iter().map(|(_, r)| *r));
+            found.clear();
+            found.resize(batch.len(), Hit::MISS);
+            target.scene.intersect_stream(&batch, &mut found, &StreamOptions::CALLER);
+            let mut next = 0;
+            for idx in 0..live.len() {
+                let hit = found[idx];
+                if !hit.is_hit() {
+                    continue;
+                }
+                let (j, mut ray) = live[idx];
+                hits.push((j, hit));
+                let step = min_step / ray.dir.length();
+                // At least the next float above t: the interval [tnear, tfar] holds tnear.
+                ray.tnear = (hit.t + step).max(hit.t.next_up());
+                if ray.tnear.is_finite() && ray.tnear <= ray.tfar {
+                    live[next] = (j, ray);
+                    next += 1;
+                }
             }
-            out
-        })
-        .collect();
+            live.truncate(next);
+        }
+        // Ray-major; the stable sort keeps each ray's hits nearest first.
+        hits.sort_by_key(|&(j, _)| j);
+        for (j, h) in hits {
+            out.ray.push((start + j as usize) as i64);
+            out.prim.push(target.caller_prim(h.prim));
+            out.t.push(h.t);
+            out.u.push(h.u);
+            out.v.push(h.v);
+        }
+    });
     let mut all = AllHits::default();
     let total: usize = parts.iter().map(|p| p.ray.len()).sum();
     all.ray.reserve_exact(total);

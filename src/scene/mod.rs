@@ -18,6 +18,6 @@ pub use cache::{CacheError, CacheReport};
 pub use camera::Camera;
 pub use light::Light;
 pub use material::{Bsdf, Material, MaterialId};
-pub use query::{Counting, STREAM_CHUNK, StreamOptions, Threads, par_for_each_chunk};
+pub use query::{Counting, STREAM_CHUNK, StreamOptions, Threads, par_for_each_chunk, par_for_each_chunk_of};
 pub use store::{Scene, SpheresSoa, SurfaceHit, TrianglesSoa};
 pub use verify::AccelError;

@@ -61,8 +61,8 @@ impl StreamOptions {
 
 /// Runs `f` on matching chunks of `items` and `out` (of [`STREAM_CHUNK`] items, each a rayon
 /// task of its own) over the current rayon pool, each chunk counting its work into a counter
-/// of its own; the chunks' counts are added into `counter`. The one parallel loop of the
-/// stream queries, the kernel registry's runs and the Python module's queries.
+/// of its own; the chunks' counts are added into `counter`. The stream queries' and the kernel
+/// registry's parallel loop ([`par_for_each_chunk_of`] with `out`'s chunks).
 ///
 /// # Panics
 /// When `out` is shorter than `items`.
@@ -74,9 +74,27 @@ where
     F: Fn(&[A], &mut [B], &mut C) + Sync,
 {
     assert!(out.len() >= items.len(), "one answer per item");
+    par_for_each_chunk_of(items, out.par_chunks_mut(STREAM_CHUNK), counter, f);
+}
+
+/// [`par_for_each_chunk`] with the outputs of each chunk given as a parallel iterator of
+/// `items.len().div_ceil(STREAM_CHUNK)` values (for example several arrays' chunks zipped):
+/// the one parallel loop of the stream queries, the kernel registry's runs and the Python
+/// module's queries.
+///
+/// # Panics
+/// When `out` yields fewer values than `items` has chunks.
+pub fn par_for_each_chunk_of<A, O, C, F>(items: &[A], out: O, counter: &mut C, f: F)
+where
+    A: Sync,
+    O: IndexedParallelIterator,
+    C: Counter + Default + Send + std::ops::AddAssign,
+    F: Fn(&[A], O::Item, &mut C) + Sync,
+{
+    assert!(out.len() >= items.len().div_ceil(STREAM_CHUNK), "one output per chunk");
     let total = items
         .par_chunks(STREAM_CHUNK)
-        .zip(out.par_chunks_mut(STREAM_CHUNK))
+        .zip(out)
         .with_max_len(1)
         .map(|(a, b)| {
             let mut c = C::default();
