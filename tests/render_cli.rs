@@ -142,7 +142,7 @@ fn info_reports_what_it_keeps_and_embree_beside_it() {
             Ok(v) if cfg!(feature = "embree") => {
                 let e = v["embree_builds"].as_array().unwrap();
                 let names: Vec<_> = e.iter().map(|b| b["quality"].as_str().unwrap()).collect();
-                assert_eq!(names, ["medium", "high"], "{order:?}");
+                assert_eq!(names, ["medium", "high", "compact"], "{order:?}");
                 assert!(e.iter().all(|b| b["seconds"].as_f64().unwrap() > 0.0 && b["bytes"].as_u64().unwrap() > 0));
                 assert_eq!(v["builds"].as_array().unwrap().len(), 1, "raypack's build is still there");
             }

@@ -120,6 +120,9 @@ pub struct EmbreeOptions {
     /// `RTC_SCENE_FLAG_ROBUST`: conservative traversal and a watertight triangle test
     /// (slower). Off by default, as in Embree.
     pub robust: bool,
+    /// `RTC_SCENE_FLAG_COMPACT`: Embree's smallest tree (its compressed leaf layout), for
+    /// comparing memory with raypack's compact build. Off by default, as in Embree.
+    pub compact: bool,
     /// Worker threads of the Embree device, which builds the BVH (`threads=N` in the device
     /// configuration); 0 (the default) uses every hardware thread. Queries run on the
     /// caller's threads whatever this is.
@@ -132,7 +135,7 @@ pub struct EmbreeOptions {
 
 impl Default for EmbreeOptions {
     fn default() -> Self {
-        Self { quality: EmbreeQuality::Medium, robust: false, threads: 0, max_isa: None }
+        Self { quality: EmbreeQuality::Medium, robust: false, compact: false, threads: 0, max_isa: None }
     }
 }
 
@@ -243,7 +246,8 @@ impl EmbreeScene {
             EmbreeQuality::Medium => 1,
             EmbreeQuality::High => 2,
         };
-        let flags = if options.robust { 1 } else { 0 };
+        // The shim's `RpSceneFlags` bits.
+        let flags = c_int::from(options.robust) | c_int::from(options.compact) << 1;
         let max_isa: &CStr = match options.max_isa {
             None => c"",
             Some(Isa::Baseline) => c"sse2",

@@ -72,7 +72,10 @@ RpEmbree* rp_embree_new(const float* positions, size_t num_vertices, const uint3
   rtcSetDeviceMemoryMonitorFunction(e->device, rp_memory_monitor, e);
 
   e->scene = rtcNewScene(e->device);
-  rtcSetSceneFlags(e->scene, (flags & RP_SCENE_ROBUST) ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
+  enum RTCSceneFlags scene_flags = RTC_SCENE_FLAG_NONE;
+  if (flags & RP_SCENE_ROBUST) scene_flags |= RTC_SCENE_FLAG_ROBUST;
+  if (flags & RP_SCENE_COMPACT) scene_flags |= RTC_SCENE_FLAG_COMPACT;
+  rtcSetSceneFlags(e->scene, scene_flags);
   enum RTCBuildQuality q = quality <= RP_QUALITY_LOW      ? RTC_BUILD_QUALITY_LOW
                            : quality == RP_QUALITY_MEDIUM ? RTC_BUILD_QUALITY_MEDIUM
                                                           : RTC_BUILD_QUALITY_HIGH;

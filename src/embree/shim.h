@@ -38,7 +38,9 @@ enum RpQuality { RP_QUALITY_LOW = 0, RP_QUALITY_MEDIUM = 1, RP_QUALITY_HIGH = 2 
 /* Scene flags (bit set). */
 enum RpSceneFlags {
   /* RTC_SCENE_FLAG_ROBUST: conservative traversal and the watertight triangle test. */
-  RP_SCENE_ROBUST = 1
+  RP_SCENE_ROBUST = 1,
+  /* RTC_SCENE_FLAG_COMPACT: Embree's smallest tree (compressed leaves), a little slower. */
+  RP_SCENE_COMPACT = 2
 };
 
 typedef struct RpEmbree RpEmbree;

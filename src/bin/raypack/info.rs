@@ -90,7 +90,7 @@ pub struct BuildInfo {
 /// Figures of one Embree build over the same triangles (`raypack info --against embree`).
 #[derive(Clone, Debug)]
 pub struct EmbreeBuildInfo {
-    /// `medium` or `high`.
+    /// `medium`, `high` or `compact` (MEDIUM with `RTC_SCENE_FLAG_COMPACT`).
     pub quality: &'static str,
     /// Wall-clock seconds of `rtcCommitScene`.
     pub seconds: f64,
@@ -237,7 +237,7 @@ pub fn scene_info(path: Option<&Path>, opts: &InfoOptions) -> Result<SceneInfo, 
     Ok(info)
 }
 
-/// Embree MEDIUM and HIGH builds of a scene's triangles on the current rayon pool's thread
+/// Embree MEDIUM, HIGH and MEDIUM with `RTC_SCENE_FLAG_COMPACT` builds of a scene's triangles on the current rayon pool's thread
 /// count; refused when the scene also has `spheres` (the Embree wrapper passes triangles only).
 #[cfg(feature = "embree")]
 fn embree_builds(
@@ -251,13 +251,17 @@ fn embree_builds(
     }
     let (positions, indices) = (&triangles.positions, &triangles.indices);
     let mut out = Vec::new();
-    for quality in [EmbreeQuality::Medium, EmbreeQuality::High] {
-        let options =
-            EmbreeOptions { quality, threads: rayon::current_num_threads(), max_isa: isa, ..EmbreeOptions::default() };
+    for (name, quality, compact) in [
+        ("medium", EmbreeQuality::Medium, false),
+        ("high", EmbreeQuality::High, false),
+        ("compact", EmbreeQuality::Medium, true),
+    ] {
+        let threads = rayon::current_num_threads();
+        let options = EmbreeOptions { quality, compact, threads, max_isa: isa, ..EmbreeOptions::default() };
         let peak = PeakResident::start();
         let e = EmbreeScene::from_mesh(positions, indices, options).map_err(|e| InfoError::Embree(e.to_string()))?;
         out.push(EmbreeBuildInfo {
-            quality: quality.name(),
+            quality: name,
             seconds: e.build_time().as_secs_f64(),
             bytes: e.bvh_bytes(),
             peak_added_bytes: peak.added(),

@@ -339,7 +339,8 @@ struct InfoArgs {
     /// Keep the binary BVH after the collapse and report it (the kernels do not need it).
     #[arg(long)]
     keep_bvh2: bool,
-    /// Also time Embree's MEDIUM and HIGH builds of the same triangles on as many threads.
+    /// Also time Embree's MEDIUM, HIGH and compact (MEDIUM with `RTC_SCENE_FLAG_COMPACT`) builds
+    /// of the same triangles on as many threads.
     #[arg(long, value_enum)]
     against: Option<AgainstArg>,
     /// With --against: build Embree's BVHs first (the first builds of a process pay for
