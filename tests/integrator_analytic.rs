@@ -5,7 +5,7 @@
 //! Scenes are built in code and rendered small, so that each test takes a fraction of a second.
 
 use raypack::generate::uv_sphere;
-use raypack::render::{self, IntegratorKind, RenderOutput, RenderSettings};
+use raypack::render::{self, IntegratorKind, RenderOutput, RenderSettings, SamplerKind};
 use raypack::{BuildOptions, Camera, Light, Material, Scene, SceneBuilder, Vec3};
 
 fn settings(w: usize, h: usize, integrator: IntegratorKind) -> RenderSettings {
@@ -380,16 +380,17 @@ fn delta_lights_are_black_under_hemisphere_sampling() {
 // ---------------------------------------------------------------------------------------------
 // Convergence, adaptive sampling, acne, determinism.
 
-#[test]
-fn error_falls_like_one_over_root_spp() {
-    // The furnace under -H: every pixel's expected value is exactly L (also at the sphere's
-    // silhouette, where jittered samples mix sphere and background).
+/// The slope of log RMSE against log spp on the furnace under -H (every pixel's expected
+/// value is exactly L, also at the sphere's silhouette, where jittered samples mix sphere and
+/// background), with `sampler`'s numbers.
+fn furnace_error_slope(sampler: SamplerKind) -> (f64, Vec<(f64, f64)>) {
     let (scene, camera) = furnace(Material::diffuse(Vec3::ONE));
     let mut pts = Vec::new();
     for spp in [1u32, 4, 16, 64] {
         let mut s = settings(24, 24, IntegratorKind::Direct);
         s.hemisphere_sampling = true;
         s.samples_per_pixel = spp;
+        s.sampler = sampler;
         let out = render(&scene, &camera, &s);
         let mse =
             out.film.pixels.iter().map(|p| ((p.x - ENV) as f64).powi(2)).sum::<f64>() / out.film.pixels.len() as f64;
@@ -399,8 +400,25 @@ fn error_falls_like_one_over_root_spp() {
     let (mx, my) = (pts.iter().map(|p| p.0).sum::<f64>() / n, pts.iter().map(|p| p.1).sum::<f64>() / n);
     let slope =
         pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum::<f64>() / pts.iter().map(|p| (p.0 - mx).powi(2)).sum::<f64>();
-    eprintln!("log RMSE vs log spp slope {slope}");
+    (slope, pts)
+}
+
+#[test]
+fn error_falls_like_one_over_root_spp() {
+    let (slope, pts) = furnace_error_slope(SamplerKind::Independent);
     assert!((slope + 0.5).abs() < 0.05, "log RMSE vs log spp slope {slope}, expected -0.5 ({pts:?})");
+}
+
+/// Stratified samples converge faster than independent ones on a smooth integrand: the Sobol'
+/// sampler's error falls more steeply than `1 / sqrt(spp)`, and is lower at every count past 1.
+#[test]
+fn sobol_error_falls_faster_than_one_over_root_spp() {
+    let (slope, pts) = furnace_error_slope(SamplerKind::Sobol);
+    let (_, independent) = furnace_error_slope(SamplerKind::Independent);
+    assert!(slope < -0.65, "log RMSE vs log spp slope {slope}, expected steeper than -0.5 ({pts:?})");
+    for (s, i) in pts.iter().zip(&independent).skip(1) {
+        assert!(s.1 < i.1, "at spp {:.0}: log RMSE {} (sobol) against {} (independent)", s.0.exp(), s.1, i.1);
+    }
 }
 
 #[test]

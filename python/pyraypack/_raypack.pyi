@@ -202,6 +202,7 @@ def render(
     width: int = 480,
     height: int = 360,
     seed: int = 0,
+    sampler: Literal["sobol", "independent"] = "sobol",
     integrator: _Integrator = "global",
     hemisphere: bool = False,
     russian_roulette: bool = True,
@@ -215,8 +216,9 @@ def render(
     """Renders a scene (a ``Scene`` or a scene file's path) with raypack's path tracer, as
     ``raypack render`` does with the same settings, and returns the linear HDR image as
     float32 ``(height, width, 3)``, top row first. The image depends on the seed only, not on
-    the thread count. ``quality``, ``watertight`` and ``bvh_cache`` apply when ``scene`` is a
-    path.
+    the thread count. ``sampler`` chooses the paths' random numbers: ``"sobol"`` (scrambled
+    Sobol' points, less noise per sample) or ``"independent"``. ``quality``, ``watertight`` and
+    ``bvh_cache`` apply when ``scene`` is a path.
 
     ``crop_window=(x0, x1, y0, y1)`` (fractions, as pbrt's ``--cropwindow``) or
     ``pixel_bounds=(x0, x1, y0, y1)`` (pixels, ends exclusive) render only that window and

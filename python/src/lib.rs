@@ -17,7 +17,7 @@ use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyRuntimeError, PyTypeErr
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyTuple};
 use raypack::io::LoadError;
-use raypack::render::{IntegratorKind, RenderSettings};
+use raypack::render::{IntegratorKind, RenderSettings, SamplerKind};
 use raypack::{BuildOptions, BuildQuality, CommitReport, Material, Scene, SceneBuilder};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -715,7 +715,7 @@ fn load_path(py: Python<'_>, path: &Path, build: &BuildArgs, for_render: bool) -
 /// (``pyraypack.tile_bounds`` gives the windows of ``raypack render --tile``).
 #[pyfunction]
 #[pyo3(signature = (scene, *, spp = 1, max_depth = 1, light_samples = 1, width = 480, height = 360, seed = 0,
-    integrator = "global", hemisphere = false, russian_roulette = true, threads = None, quality = "medium",
+    sampler = "sobol", integrator = "global", hemisphere = false, russian_roulette = true, threads = None, quality = "medium",
     watertight = false, bvh_cache = None, crop_window = None, pixel_bounds = None))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
@@ -727,6 +727,7 @@ fn render<'py>(
     width: usize,
     height: usize,
     seed: u64,
+    sampler: &str,
     integrator: &str,
     hemisphere: bool,
     russian_roulette: bool,
@@ -770,6 +771,7 @@ fn render<'py>(
         integrator: parse_integrator(integrator)?,
         heatmap: Default::default(),
         seed,
+        sampler: sampler.parse::<SamplerKind>().map_err(|e| PyValueError::new_err(format!("sampler: {e}")))?,
         brute_force: false,
         russian_roulette,
         stream_order: None,

@@ -50,6 +50,21 @@ def test_the_built_in_sizes_and_threads():
     assert not np.array_equal(one, other_seed)
 
 
+def test_the_sampler_is_the_clis(tmp_path):
+    """``sampler=`` is the CLI's ``--sampler``: the same image for the same name, another for the
+    other name, and an unknown name is a ValueError naming the argument."""
+    path = scenes_dir() / "cs184" / "sky" / "CBspheres.dae"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pyraypack.SceneWarning)
+        independent = pyraypack.render(path, sampler="independent", **SETTINGS)
+        sobol = pyraypack.render(path, **SETTINGS)
+        assert np.array_equal(independent, cli_render(path, tmp_path / "i.exr", "--sampler", "independent"))
+        assert np.array_equal(sobol, cli_render(path, tmp_path / "s.exr"))
+        assert not np.array_equal(sobol, independent)
+        with pytest.raises(ValueError, match="sampler: unknown sampler \"halton\""):
+            pyraypack.render(path, sampler="halton", **SETTINGS)
+
+
 def test_scene_from_arrays_renders_as_the_same_ply(tmp_path):
     v, f = uv_sphere(20, 40)
     v = v.astype(np.float32)

@@ -23,7 +23,7 @@ use super::bsdf;
 use super::frame::Frame;
 use super::light::{LightContext, LightSet, SampledLight};
 use super::queue::{DirectQueue, DirectSample};
-use super::sampler::Rng;
+use super::sampler::Sampler;
 use super::sampling::{UNIFORM_HEMISPHERE_PDF, uniform_hemisphere};
 use super::spawn::{spawn_ray, spawn_ray_infinite, spawn_ray_to};
 use super::trace::Tracer;
@@ -186,13 +186,13 @@ pub struct PathState {
     /// True after the camera or a specular bounce: emission met next is counted.
     pub sees_emission: bool,
     /// The path's own random numbers.
-    pub rng: Rng,
+    pub rng: Sampler,
 }
 
 impl PathState {
     /// A path leaving the camera, drawing from `rng`.
     #[inline]
-    pub fn new(rng: Rng) -> Self {
+    pub fn new(rng: Sampler) -> Self {
         Self { l: Vec3::ZERO, beta: Vec3::ONE, eta_scale: 1.0, depth: 0, sees_emission: true, rng }
     }
 }
@@ -427,7 +427,15 @@ impl<'a> Integrator<'a> {
     /// CS184 `estimate_direct_lighting_importance`: `-l` samples of each area light, one of
     /// each delta light, each with a shadow ray (none when the light touches the point).
     #[inline]
-    fn queue_lights(&self, s: &SurfaceHit, b: &Bsdf, frame: &Frame, wo: Vec3, rng: &mut Rng, out: &mut DirectQueue) {
+    fn queue_lights(
+        &self,
+        s: &SurfaceHit,
+        b: &Bsdf,
+        frame: &Frame,
+        wo: Vec3,
+        rng: &mut Sampler,
+        out: &mut DirectQueue,
+    ) {
         for (group, light) in self.lights.lights.iter().enumerate() {
             let n = if light.is_delta() { 1 } else { self.settings.light_samples.max(1) };
             for _ in 0..n {
@@ -474,7 +482,7 @@ impl<'a> Integrator<'a> {
         b: &Bsdf,
         frame: &Frame,
         wo: Vec3,
-        rng: &mut Rng,
+        rng: &mut Sampler,
         out: &mut DirectQueue,
     ) {
         for _ in 0..self.hemisphere_samples {

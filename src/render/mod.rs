@@ -39,6 +39,7 @@ pub use film::{Encoding, Film, ImageError, ImageFormat};
 pub use integrator::{IntegratorKind, UnknownIntegrator};
 pub use memory::{render_bytes, render_bytes_per_pixel};
 pub use order::RayOrder;
+pub use sampler::SamplerKind;
 pub use stats::{RayCounts, RayKind, RayLog};
 pub use wavefront::{PhaseTimes, StreamOrder};
 pub use window::{PixelBounds, WindowError};
@@ -47,7 +48,7 @@ use crate::math::Vec3;
 use crate::ray::Ray;
 use crate::scene::{Camera, Scene};
 use adaptive::PixelEstimate;
-use sampler::Rng;
+use sampler::SamplerSource;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Mutex, TryLockError};
 use std::time::{Duration, Instant};
@@ -78,6 +79,8 @@ pub struct RenderSettings {
     pub heatmap: heatmap::HeatmapSettings,
     /// Seed of all random numbers.
     pub seed: u64,
+    /// How each path's random numbers are made ([`SamplerKind`]; the image depends on it).
+    pub sampler: SamplerKind,
     /// Test every primitive instead of using the BVH (CS184's "without BVH" timing).
     pub brute_force: bool,
     /// Terminate paths by Russian roulette from the second bounce on (unbiased).
@@ -111,6 +114,7 @@ impl Default for RenderSettings {
             integrator: IntegratorKind::Global,
             heatmap: heatmap::HeatmapSettings::default(),
             seed: 0,
+            sampler: SamplerKind::default(),
             brute_force: false,
             russian_roulette: true,
             stream_order: None,
@@ -330,7 +334,7 @@ fn render_tile(
     let mut positions: Vec<[f32; 2]> = Vec::with_capacity(cap);
     // The top-left corner of each pixel of the tile, in image coordinates.
     let corners: Vec<[f32; 2]> = (0..npix).map(|i| [(x0 + i % tw) as f32, (y0 + i / tw) as f32]).collect();
-    let streams = Rng::streams(settings.seed);
+    let samplers = SamplerSource::new(settings.sampler, settings.seed);
     // Pixels none of whose camera rays can hit the scene (their cone misses every
     // primitive's box) take the value of a miss for every sample, without tracing: the same
     // value, bit for bit, that tracing their rays would give (`Integrator::camera_miss`).
@@ -384,7 +388,7 @@ fn render_tile(
                     continue;
                 }
                 let pixel = (y0 + i / tw) * w + x0 + i % tw;
-                wavefront.push_samples((taken..pass_end).map(|s| streams.stream(sample_stream(pixel, s))));
+                wavefront.push_samples((taken..pass_end).map(|s| samplers.sampler(pixel, s)));
                 owner.extend(std::iter::repeat_n(i as u32, (pass_end - taken) as usize));
             }
             // One sample goes through the pixel centre; more are jittered uniformly, by the

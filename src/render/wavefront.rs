@@ -25,7 +25,7 @@
 use super::integrator::{Entries, Integrator, PathState, STEP, SampleLanes};
 use super::order::{RayOrder, SortScratch};
 use super::queue::{DirectQueue, RayQueue};
-use super::sampler::Rng;
+use super::sampler::Sampler;
 use super::stats::{RayKind, RayLog};
 use crate::math::Vec3;
 use crate::ray::{Hit, Ray};
@@ -47,7 +47,7 @@ pub struct StreamOrder {
 #[derive(Clone, Debug, Default)]
 pub struct Wavefront {
     /// The random number generators of the batch's camera samples, in sample order.
-    rngs: Vec<Rng>,
+    rngs: Vec<Sampler>,
     /// The radiance each camera sample brought back, in sample order.
     radiance: Vec<Vec3>,
     /// The paths of the samples whose camera ray hit something, in sample order: a sample
@@ -133,13 +133,13 @@ impl Wavefront {
     /// Adds a camera sample drawing from each generator of `rngs` (its path's, if its camera
     /// ray hits); their camera rays follow with [`Wavefront::set_camera_rays`].
     #[inline]
-    pub fn push_samples(&mut self, rngs: impl Iterator<Item = Rng>) {
+    pub fn push_samples(&mut self, rngs: impl Iterator<Item = Sampler>) {
         self.rngs.extend(rngs);
     }
 
     /// The random number generators of the batch's camera samples, in order (a camera
     /// sample's own numbers, such as its position in the pixel, are drawn from them first).
-    pub fn sample_rngs(&mut self) -> impl Iterator<Item = &mut Rng> {
+    pub fn sample_rngs(&mut self) -> impl Iterator<Item = &mut Sampler> {
         self.rngs.iter_mut()
     }
 
@@ -424,7 +424,7 @@ pub fn worker_bytes(paths: usize, direct: usize) -> u64 {
     let Capacity { paths, wave, samples } = Capacity::of(paths, direct);
     let ray = size_of::<Ray>() + size_of::<u32>();
     let per_path =
-        size_of::<Rng>() + size_of::<Vec3>() + size_of::<PathState>() + size_of::<u32>() + ray + size_of::<Hit>();
+        size_of::<Sampler>() + size_of::<Vec3>() + size_of::<PathState>() + size_of::<u32>() + ray + size_of::<Hit>();
     let per_wave =
         ray + size_of::<Hit>() + size_of::<bool>() + size_of::<SurfaceHit>() + size_of::<super::queue::DirectPoint>();
     let per_sample = size_of::<super::queue::DirectSample>() + ray + size_of::<bool>();

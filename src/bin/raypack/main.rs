@@ -15,7 +15,7 @@ mod version;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use raypack::io::LoadError;
-use raypack::render::{ImageError, IntegratorKind};
+use raypack::render::{ImageError, IntegratorKind, SamplerKind};
 use raypack::{BuildOptions, BuildQuality, Isa, Scene, SceneBuilder};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -166,6 +166,12 @@ fn integrator_parser() -> impl clap::builder::TypedValueParser<Value = Integrato
         .try_map(|name| name.parse::<IntegratorKind>())
 }
 
+/// `--sampler`: the library's names ([`SamplerKind::ALL`]), read by its `FromStr`.
+fn sampler_parser() -> impl clap::builder::TypedValueParser<Value = SamplerKind> {
+    use clap::builder::{PossibleValuesParser, TypedValueParser};
+    PossibleValuesParser::new(SamplerKind::ALL.map(|k| k.name())).try_map(|name| name.parse::<SamplerKind>())
+}
+
 #[derive(Args)]
 struct RenderArgs {
     /// Scene file (.dae, .obj, .ply); omit for the built-in Cornell box.
@@ -245,6 +251,10 @@ struct RenderArgs {
     /// Seed of all random numbers.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// How each path's random numbers are made: `sobol` (scrambled Sobol' points, stratified
+    /// per pixel: less noise per sample) or `independent` (independent uniforms).
+    #[arg(long, value_parser = sampler_parser(), default_value_t = SamplerKind::Sobol)]
+    sampler: SamplerKind,
     /// Trace without the BVH, testing every primitive (CS184's "without BVH" timing).
     #[arg(long)]
     brute_force: bool,

@@ -123,6 +123,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             integrator,
             heatmap: Default::default(),
             seed: a.seed,
+            sampler: a.sampler,
             brute_force: a.brute_force,
             russian_roulette: !a.no_russian_roulette,
             stream_order: None,

@@ -446,7 +446,7 @@ mod tests {
                 let mut wf = Wavefront::new();
                 wf.reserve(3000, &integrator);
                 let mut dirs = Rng::new(case as u64, 1);
-                wf.push_samples((0..3000).map(|i| Rng::new(7, i)));
+                wf.push_samples((0..3000).map(|i| crate::render::sampler::Sampler::Independent(Rng::new(7, i))));
                 wf.set_camera_rays(|rays| {
                     rays.extend((0..3000).map(|_| {
                         let d = Vec3::new(dirs.next_f32() - 0.5, dirs.next_f32() - 0.5, dirs.next_f32() - 0.5);
