@@ -124,10 +124,10 @@ impl Sampler {
 /// draws made so far.
 ///
 /// A pad's point is `sobol(d, i) ^ s_d` for dimensions `d = 0, 1`, where `i` is the index
-/// shuffled by Owen's scramble, `i = rev(lk_hash(rev(index), s0))` ([`lk_hash`]). With `j =
+/// shuffled by Owen's scramble, `i = rev(lk_hash(rev(index), s0))` (`lk_hash`). With `j =
 /// lk_hash(rev(index), s0)`, dimension 0 (whose generator matrix reverses the bits) is `j`
 /// itself and dimension 1 is `sobol_1(rev(j))`, a linear map read from tables
-/// ([`sobol_dim1_of_reversed`]): no bit reversal per draw.
+/// (`sobol_dim1_of_reversed`): no bit reversal per draw.
 // Tried: Owen-scrambled values (Burley's `nested_uniform_scramble` of each dimension) instead
 // of the digital shift: the same back-wall noise on the built-in box at 128 spp and a third
 // more shading time (PERFORMANCE.md, "Sobol' samples").
