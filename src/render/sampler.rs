@@ -177,6 +177,73 @@ impl SobolPath {
     }
 }
 
+/// Paths whose draws [`SobolLanes`] makes at once.
+pub const SOBOL_LANES: usize = 8;
+
+/// The Sobol' draws of up to [`SOBOL_LANES`] paths at once: lane `j` draws what its path's
+/// [`Sampler::Sobol`] would, bit for bit, and advances only when its bit of the draw's mask is
+/// set. Each draw is straight-line integer arithmetic over the lanes (no branch per lane), which
+/// the compiler vectorises for the ISA the caller is compiled for: the lane shader runs it
+/// inside its ISA dispatch.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SobolLanes {
+    index_reversed: [u32; SOBOL_LANES],
+    key: [u32; SOBOL_LANES],
+    pad: [u32; SOBOL_LANES],
+}
+
+impl SobolLanes {
+    /// Takes `sampler`'s place in the sequence into lane `j`; false (lane untouched) when it
+    /// is not a Sobol' sampler.
+    #[inline]
+    pub fn load(&mut self, j: usize, sampler: &Sampler) -> bool {
+        let Sampler::Sobol(s) = sampler else { return false };
+        (self.index_reversed[j], self.key[j], self.pad[j]) = (s.index_reversed, s.key, s.pad);
+        true
+    }
+
+    /// Moves `sampler` (the one lane `j` was loaded from) past the draws lane `j` made.
+    #[inline]
+    pub fn store(&self, j: usize, sampler: &mut Sampler) {
+        if let Sampler::Sobol(s) = sampler {
+            debug_assert_eq!((s.index_reversed, s.key), (self.index_reversed[j], self.key[j]), "lane {j}'s sampler");
+            s.pad = self.pad[j];
+        }
+    }
+
+    /// [`Sampler::next_2d`] of the lanes of `mask` into `u[0][j], u[1][j]`; the other lanes
+    /// of `u` keep their values.
+    #[inline(always)]
+    pub fn next_2d(&mut self, mask: u32, u: &mut [[f32; SOBOL_LANES]; 2]) {
+        for j in 0..SOBOL_LANES {
+            let (index_reversed, key, pad) = (self.index_reversed[j], self.key[j], self.pad[j]);
+            // `SobolPath::next_2d` before and after SOBOL_PADS, both computed, one kept.
+            let seed = hash32(key ^ pad.wrapping_mul(0x9e37_79b9));
+            let shuffled = lk_hash(index_reversed, seed);
+            let sobol = (
+                shuffled ^ sub_seed(seed, 0x68e3_1da5),
+                sobol_dim1_of_reversed(shuffled) ^ sub_seed(seed, 0xb529_7a4d),
+            );
+            let h = hash32(key ^ hash32(index_reversed ^ pad.wrapping_mul(0x9e37_79b9)));
+            let hashed = (h, hash32(h ^ 0x2f6b_9a31));
+            let (x, y) = if pad < SOBOL_PADS { sobol } else { hashed };
+            let on = mask >> j & 1;
+            if on != 0 {
+                (u[0][j], u[1][j]) = (unit(x), unit(y));
+            }
+            self.pad[j] = pad + on;
+        }
+    }
+
+    /// Skips one draw (1D or 2D) in the lanes of `mask`, as a draw whose value is not used.
+    #[inline(always)]
+    pub fn skip(&mut self, mask: u32) {
+        for j in 0..SOBOL_LANES {
+            self.pad[j] += mask >> j & 1;
+        }
+    }
+}
+
 /// Draws of a path that take scrambled Sobol' points; later draws take independent hashed
 /// uniforms. Stratification pays in the first bounces' pixel, light and BSDF samples, where the
 /// integrand is smooth; deeper draws gain little from it and a Sobol' pad costs several times a
@@ -280,6 +347,57 @@ mod tests {
             v ^= v >> 1;
         }
         x
+    }
+
+    /// Eight paths drawn together equal each path drawn alone, bit for bit, whatever the
+    /// masks, before and after the Sobol' pads run out.
+    #[test]
+    fn sobol_lanes_draw_what_each_path_draws() {
+        let source = SamplerSource::new(SamplerKind::Sobol, 99);
+        let mut rng = Rng::new(3, 4);
+        for round in 0..200u32 {
+            let mut alone: Vec<Sampler> =
+                (0..SOBOL_LANES).map(|j| source.sampler(round as usize * 31 + j, rng.next_u32() % 4096)).collect();
+            // Lanes start at different places in their paths.
+            for (j, s) in alone.iter_mut().enumerate() {
+                for _ in 0..(round as usize + j) % 11 {
+                    s.next_f32();
+                }
+            }
+            let start = alone.clone();
+            let mut together = SobolLanes::default();
+            for (j, s) in alone.iter().enumerate() {
+                assert!(together.load(j, s));
+            }
+            let mut u = [[-1.0f32; SOBOL_LANES]; 2];
+            for draw in 0..12 {
+                let mask = rng.next_u32() & 0xff;
+                let before = u;
+                if draw % 3 == 2 {
+                    together.skip(mask);
+                } else {
+                    together.next_2d(mask, &mut u);
+                }
+                for (j, s) in alone.iter_mut().enumerate() {
+                    let want = match (mask >> j & 1 != 0, draw % 3 == 2) {
+                        (true, false) => s.next_2d(),
+                        (true, true) => {
+                            s.next_f32();
+                            (before[0][j], before[1][j])
+                        }
+                        (false, _) => (before[0][j], before[1][j]),
+                    };
+                    assert_eq!((u[0][j], u[1][j]), want, "round {round} draw {draw} lane {j}");
+                }
+            }
+            for (j, s) in alone.iter().enumerate() {
+                let mut stored = start[j].clone();
+                together.store(j, &mut stored);
+                // The same place in the sequence: the next draws agree.
+                assert_eq!(stored.clone().next_2d(), s.clone().next_2d(), "round {round} lane {j}");
+            }
+        }
+        assert!(!SobolLanes::default().load(0, &Sampler::Independent(Rng::new(1, 1))));
     }
 
     #[test]

@@ -20,6 +20,7 @@ use crate::math::orthonormal_basis_lanes;
 use crate::ray::{Hit, Ray};
 use crate::render::light::SampledLight;
 use crate::render::queue::{DirectQueue, DirectSample};
+use crate::render::sampler::SobolLanes;
 use crate::render::sampling::concentric_disk_lanes;
 use crate::render::spawn::{offset_origin_lanes, spawn_ray_to_lanes, toward_lanes};
 use crate::scene::{Bsdf, SurfaceHit};
@@ -163,6 +164,9 @@ impl Integrator<'_> {
         scratch.resize(lights.len(), SampleLanes::default());
         let mut rows = StepRows::default();
         let mut albedos = [Vec3::ZERO; STEP];
+        // The lanes of Sobol' paths draw their numbers together in the step; the others here.
+        let mut sobol = SobolLanes::default();
+        let mut sobol_lanes = 0;
         for j in crate::simd::bits(mask) {
             let k = k0 + j;
             let (ray, hit, s) = (&e.rays[k], &e.hits[k], &e.surfaces[k]);
@@ -174,17 +178,21 @@ impl Integrator<'_> {
             }
             // `Frame::to_local(-ray.dir).z`.
             let wo_z = (-ray.dir).dot(s.shading_normal);
+            let in_sobol = sobol.load(j, &path.rng);
+            sobol_lanes |= (in_sobol as u32) << j;
             if counted(path.depth + 1) && wo_z != 0.0 {
                 rows.direct |= 1 << j;
-                for sample in scratch.iter_mut() {
+                for sample in scratch.iter_mut().filter(|_| !in_sobol) {
                     (sample.u[0][j], sample.u[1][j]) = path.rng.next_2d();
                 }
             }
             if path.depth + 2 <= hi {
                 rows.scatter |= 1 << j;
-                (rows.u[0][j], rows.u[1][j]) = path.rng.next_2d();
-                // The lobe choice, which a diffuse BSDF draws and does not use.
-                path.rng.next_f32();
+                if !in_sobol {
+                    (rows.u[0][j], rows.u[1][j]) = path.rng.next_2d();
+                    // The lobe choice, which a diffuse BSDF draws and does not use.
+                    path.rng.next_f32();
+                }
             }
             albedos[j] = albedo;
             rows.reflects |= ((albedo * FRAC_1_PI != Vec3::ZERO) as u32) << j;
@@ -195,13 +203,23 @@ impl Integrator<'_> {
                 (r[0][j], r[1][j], r[2][j]) = (v.x, v.y, v.z);
             }
         }
-        let step = Step { rows: &mut rows, lights: &self.lights.lights, groups: &lights.samples, samples: scratch };
+        let step = Step {
+            rows: &mut rows,
+            lights: &self.lights.lights,
+            groups: &lights.samples,
+            samples: scratch,
+            sobol: &mut sobol,
+            sobol_lanes,
+        };
         dispatch(self.scene.isa(), step);
         let lane3 = |r: &Rows<3>, j: usize| Vec3::new(r[0][j], r[1][j], r[2][j]);
         for j in crate::simd::bits(mask) {
             let k = k0 + j;
             let id = e.owner[k];
             let path = &mut e.paths[id as usize];
+            if sobol_lanes >> j & 1 != 0 {
+                sobol.store(j, &mut path.rng);
+            }
             let albedo = albedos[j];
             if rows.direct >> j & 1 != 0 {
                 direct.begin(id, path.beta);
@@ -247,12 +265,27 @@ struct Step<'a> {
     lights: &'a [SampledLight],
     groups: &'a [(u32, bool)],
     samples: &'a mut [SampleLanes],
+    /// The lanes (bits of `sobol_lanes`) whose uniforms `sobol` draws here, in the one-path
+    /// order: each light sample, the BSDF sample, the unused lobe choice.
+    sobol: &'a mut SobolLanes,
+    sobol_lanes: u32,
 }
 
 impl IsaOp for Step<'_> {
     type Output = ();
     #[inline(always)]
     fn run<I: IsaLanes>(self) {
+        if self.sobol_lanes != 0 {
+            let direct = self.rows.direct & self.sobol_lanes;
+            if direct != 0 {
+                for s in self.samples.iter_mut() {
+                    self.sobol.next_2d(direct, &mut s.u);
+                }
+            }
+            let scatter = self.rows.scatter & self.sobol_lanes;
+            self.sobol.next_2d(scatter, &mut self.rows.u);
+            self.sobol.skip(scatter);
+        }
         step::<I::F8>(self.rows, self.lights, self.groups, self.samples)
     }
 }
@@ -376,10 +409,15 @@ mod tests {
                         .flatten();
                     want.push((per_light, bounce));
                 }
-                dispatch(
-                    isa,
-                    Step { rows: &mut rows, lights: &sampled, groups: &[(0, true), (1, true)], samples: &mut samples },
-                );
+                let step = Step {
+                    rows: &mut rows,
+                    lights: &sampled,
+                    groups: &[(0, true), (1, true)],
+                    samples: &mut samples,
+                    sobol: &mut SobolLanes::default(),
+                    sobol_lanes: 0,
+                };
+                dispatch(isa, step);
                 let lane3 = |r: &Rows<3>, j: usize| Vec3::new(r[0][j], r[1][j], r[2][j]);
                 for (j, (per_light, bounce)) in want.iter().enumerate() {
                     for (i, w) in per_light.iter().enumerate() {
@@ -411,9 +449,11 @@ mod tests {
     /// a time): the same radiance bit for bit, in the built-in Cornell box (diffuse walls
     /// beside a mirror and a glass sphere, so steps mix lanes and single paths) lit by its
     /// area light, a point light and an emissive triangle (sampled one path at a time), with
-    /// several light samples, every integrator view and Russian roulette on and off.
+    /// several light samples, every integrator view, Russian roulette on and off, and both
+    /// samplers (the Sobol' lanes draw their numbers together).
     #[test]
     fn wavefront_radiance_is_the_same_without_lanes() {
+        use crate::render::sampler::{SamplerKind, SamplerSource};
         use crate::render::stats::RayLog;
         use crate::render::wavefront::{PhaseTimes, StreamOrder, Wavefront};
         use crate::render::{IntegratorKind, RenderSettings};
@@ -434,7 +474,7 @@ mod tests {
                 russian_roulette: case != 3,
                 ..Default::default()
             };
-            let radiance = |lanes: bool| {
+            let radiance = |lanes: bool, sampler: SamplerKind| {
                 let mut integrator = Integrator::new(&scene, &settings);
                 let kinds =
                     integrator.lane_lights.as_ref().map(|l| l.samples.iter().map(|&(_, in_lanes)| in_lanes).collect());
@@ -446,7 +486,8 @@ mod tests {
                 let mut wf = Wavefront::new();
                 wf.reserve(3000, &integrator);
                 let mut dirs = Rng::new(case as u64, 1);
-                wf.push_samples((0..3000).map(|i| crate::render::sampler::Sampler::Independent(Rng::new(7, i))));
+                let source = SamplerSource::new(sampler, 7);
+                wf.push_samples((0..3000).map(|i| source.sampler(i / 16, i as u32 % 16)));
                 wf.set_camera_rays(|rays| {
                     rays.extend((0..3000).map(|_| {
                         let d = Vec3::new(dirs.next_f32() - 0.5, dirs.next_f32() - 0.5, dirs.next_f32() - 0.5);
@@ -457,9 +498,11 @@ mod tests {
                 wf.run(&integrator, StreamOrder::default(), &mut log, &mut times);
                 wf.radiance().map(|l| l.to_array().map(f32::to_bits)).collect::<Vec<_>>()
             };
-            let (with, without) = (radiance(true), radiance(false));
-            assert!(with.iter().filter(|l| **l != [0; 3]).count() > 300, "{kind:?}: many paths bring light");
-            assert_eq!(with, without, "{kind:?}");
+            for sampler in SamplerKind::ALL {
+                let (with, without) = (radiance(true, sampler), radiance(false, sampler));
+                assert!(with.iter().filter(|l| **l != [0; 3]).count() > 300, "{kind:?}: many paths bring light");
+                assert_eq!(with, without, "{kind:?}, {sampler} sampler");
+            }
         }
     }
 }
