@@ -275,3 +275,33 @@ fn cones_are_culled_only_when_no_ray_of_them_hits() {
         }
     }
 }
+
+/// Streams without sphere coordinates (`StreamOptions::without_sphere_uv`, the renderer's)
+/// give the same hits as with them, but `(u, v) = 0` on spheres; triangle hits are untouched.
+#[test]
+fn streams_without_sphere_coordinates_differ_only_in_sphere_uv() {
+    let soup = random_soup(500, 0.06, 12);
+    let spheres = [(Vec3::new(0.2, 0.3, 0.4), 0.15), (Vec3::new(0.7, 0.6, 0.3), 0.2)];
+    let scene = scene_of(&[&soup], &spheres, &BuildOptions::default());
+    let rays = random_rays(&scene, 4_000, 5);
+    let nt = scene.num_prims() as u32 - spheres.len() as u32;
+    let (mut with, mut without) = (vec![Hit::MISS; rays.len()], vec![Hit::MISS; rays.len()]);
+    scene.intersect_stream(&rays, &mut with, &raypack::StreamOptions::POOL);
+    scene.intersect_stream(&rays, &mut without, &raypack::StreamOptions::POOL.without_sphere_uv());
+    let mut sphere_hits = 0;
+    for (i, (w, o)) in with.iter().zip(&without).enumerate() {
+        assert_eq!((w.prim, w.t.to_bits()), (o.prim, o.t.to_bits()), "ray {i}");
+        if w.is_hit() && w.prim >= nt {
+            sphere_hits += 1;
+            assert_eq!((o.u, o.v), (0.0, 0.0), "ray {i}");
+            assert_eq!(
+                (w.u, w.v),
+                raypack::geometry::sphere::sphere_uv((rays[i].at(w.t) - spheres[(w.prim - nt) as usize].0).normalize()),
+                "ray {i}"
+            );
+        } else {
+            assert_eq!((w.u.to_bits(), w.v.to_bits()), (o.u.to_bits(), o.v.to_bits()), "ray {i}");
+        }
+    }
+    assert!(sphere_hits > 50, "too few sphere hits to mean anything: {sphere_hits}");
+}

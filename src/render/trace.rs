@@ -13,8 +13,8 @@ use crate::ray::{Hit, Ray};
 use crate::scene::{Scene, StreamOptions};
 
 /// How the renderer's streams run: on the calling thread (the tiles are the parallel work),
-/// always as packets.
-pub const RENDER_STREAMS: StreamOptions = StreamOptions::CALLER.with_kernel(StreamKernel::Packets);
+/// always as packets, without sphere hits' surface coordinates (shading reads none).
+pub const RENDER_STREAMS: StreamOptions = StreamOptions::CALLER.with_kernel(StreamKernel::Packets).without_sphere_uv();
 
 /// Ray queries against a scene, through the BVH or (`brute_force`) against every primitive.
 #[derive(Clone, Copy, Debug)]

@@ -38,24 +38,42 @@ pub enum Threads {
 }
 
 /// How [`Scene::intersect_stream`] and [`Scene::occluded_stream`] run: on which threads, and
-/// with which kernel ([`StreamKernel`]; every kernel gives the same answers).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// with which kernel ([`StreamKernel`]; every kernel gives the same answers). The default is
+/// [`StreamOptions::POOL`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct StreamOptions {
     /// The threads.
     pub threads: Threads,
     /// The kernel.
     pub kernel: StreamKernel,
+    /// Whether sphere hits get their surface coordinates `(u, v)` ([`crate::Hit`]), an
+    /// `atan2` and an `acos` per hit; without, they are 0. Everything else about a hit is the
+    /// same either way. The renderer does not read them.
+    pub sphere_uv: bool,
+}
+
+impl Default for StreamOptions {
+    fn default() -> Self {
+        Self::POOL
+    }
 }
 
 impl StreamOptions {
     /// Every thread of the pool, the kernel chosen by the tree's size (the default).
-    pub const POOL: StreamOptions = StreamOptions { threads: Threads::Pool, kernel: StreamKernel::Auto };
+    pub const POOL: StreamOptions =
+        StreamOptions { threads: Threads::Pool, kernel: StreamKernel::Auto, sphere_uv: true };
     /// The calling thread, the kernel chosen by the tree's size.
-    pub const CALLER: StreamOptions = StreamOptions { threads: Threads::Caller, kernel: StreamKernel::Auto };
+    pub const CALLER: StreamOptions =
+        StreamOptions { threads: Threads::Caller, kernel: StreamKernel::Auto, sphere_uv: true };
 
     /// These options with `kernel`.
     pub const fn with_kernel(self, kernel: StreamKernel) -> StreamOptions {
         StreamOptions { kernel, ..self }
+    }
+
+    /// These options with sphere hits' `(u, v)` left 0.
+    pub const fn without_sphere_uv(self) -> StreamOptions {
+        StreamOptions { sphere_uv: false, ..self }
     }
 }
 
@@ -292,7 +310,7 @@ impl<C: Counter> Counting<'_, C> {
         let (scene, kernel) = (self.scene, opts.kernel);
         let trace = |r: &[Ray], h: &mut [Hit], c: &mut C| {
             scene.bvh8.intersect_stream_with(scene.isa, r, h, kernel, c);
-            if scene.has_spheres() {
+            if opts.sphere_uv && scene.has_spheres() {
                 for (ray, out) in r.iter().zip(h.iter_mut()) {
                     scene.finish_hit(ray, out);
                 }
