@@ -235,6 +235,15 @@ impl SobolLanes {
         }
     }
 
+    /// [`Sampler::next_f32`] of the lanes of `mask` into `u[j]` (the first coordinate of a 2D
+    /// draw: `SobolPath::next_1d` is `next_2d`'s `x`); the other lanes of `u` keep their values.
+    #[inline(always)]
+    pub fn next_1d(&mut self, mask: u32, u: &mut [f32; SOBOL_LANES]) {
+        let mut uv = [*u, [0.0; SOBOL_LANES]];
+        self.next_2d(mask, &mut uv);
+        *u = uv[0];
+    }
+
     /// Skips one draw (1D or 2D) in the lanes of `mask`, as a draw whose value is not used.
     #[inline(always)]
     pub fn skip(&mut self, mask: u32) {
@@ -373,19 +382,20 @@ mod tests {
             for draw in 0..12 {
                 let mask = rng.next_u32() & 0xff;
                 let before = u;
-                if draw % 3 == 2 {
-                    together.skip(mask);
-                } else {
-                    together.next_2d(mask, &mut u);
+                match draw % 4 {
+                    2 => together.skip(mask),
+                    3 => together.next_1d(mask, &mut u[0]),
+                    _ => together.next_2d(mask, &mut u),
                 }
                 for (j, s) in alone.iter_mut().enumerate() {
-                    let want = match (mask >> j & 1 != 0, draw % 3 == 2) {
-                        (true, false) => s.next_2d(),
-                        (true, true) => {
+                    let want = match (mask >> j & 1 != 0, draw % 4) {
+                        (false, _) => (before[0][j], before[1][j]),
+                        (true, 2) => {
                             s.next_f32();
                             (before[0][j], before[1][j])
                         }
-                        (false, _) => (before[0][j], before[1][j]),
+                        (true, 3) => (s.next_f32(), before[1][j]),
+                        (true, _) => s.next_2d(),
                     };
                     assert_eq!((u[0][j], u[1][j]), want, "round {round} draw {draw} lane {j}");
                 }

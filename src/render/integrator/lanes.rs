@@ -14,7 +14,7 @@
 //! continuation ray. The lanes compute the shading frame, the light samples and their shadow
 //! rays, the cosine-weighted bounce direction and the continuation's origin.
 
-use super::{Frame, Integrator, PathState};
+use super::{Frame, Integrator, PathState, ROULETTE_START};
 use crate::math::Vec3;
 use crate::math::orthonormal_basis_lanes;
 use crate::ray::{Hit, Ray};
@@ -109,6 +109,13 @@ struct StepRows {
     /// The continuation's origin and unit direction.
     origin: Rows<3>,
     dir: Rows<3>,
+    /// Filled when the lanes end the step ([`finish_step`]): the paths' throughput (in: before
+    /// the bounce; out: after the BSDF sample and Russian roulette), their albedo and radiance
+    /// scaling, and the lanes whose path plays Russian roulette if it goes on.
+    beta: Rows<3>,
+    albedo: Rows<3>,
+    eta_scale: [f32; STEP],
+    roulette: u32,
 }
 
 /// A wave's entries to shade: entry `k` is ray `rays[k]` of path `owner[k]`, which found
@@ -196,6 +203,11 @@ impl Integrator<'_> {
             }
             albedos[j] = albedo;
             rows.reflects |= ((albedo * FRAC_1_PI != Vec3::ZERO) as u32) << j;
+            rows.roulette |= ((self.settings.russian_roulette && path.depth + 1 >= ROULETTE_START) as u32) << j;
+            rows.eta_scale[j] = path.eta_scale;
+            for (r, v) in [(&mut rows.beta, path.beta), (&mut rows.albedo, albedo)] {
+                (r[0][j], r[1][j], r[2][j]) = (v.x, v.y, v.z);
+            }
             rows.wo_z[j] = wo_z;
             for (r, v) in
                 [(&mut rows.p, s.position), (&mut rows.ng, s.geometric_normal), (&mut rows.ns, s.shading_normal)]
@@ -203,6 +215,8 @@ impl Integrator<'_> {
                 (r[0][j], r[1][j], r[2][j]) = (v.x, v.y, v.z);
             }
         }
+        // With every path's numbers in the lanes, the lanes end the step too.
+        let finish = sobol_lanes == mask;
         let step = Step {
             rows: &mut rows,
             lights: &self.lights.lights,
@@ -210,6 +224,7 @@ impl Integrator<'_> {
             samples: scratch,
             sobol: &mut sobol,
             sobol_lanes,
+            finish,
         };
         dispatch(self.scene.isa(), step);
         let lane3 = |r: &Rows<3>, j: usize| Vec3::new(r[0][j], r[1][j], r[2][j]);
@@ -249,7 +264,18 @@ impl Integrator<'_> {
                 }
             }
             // `Integrator::scatter` after `bsdf::sample_f` (weight `albedo`, not delta).
-            let alive = rows.scatter >> j & 1 != 0 && self.continue_path(path, albedo, 1.0, false);
+            let alive = if finish {
+                let alive = rows.scatter >> j & 1 != 0;
+                if alive {
+                    // `continue_path`'s changes to a path that goes on.
+                    path.beta = lane3(&rows.beta, j);
+                    path.depth += 1;
+                    path.sees_emission = false;
+                }
+                alive
+            } else {
+                rows.scatter >> j & 1 != 0 && self.continue_path(path, albedo, 1.0, false)
+            };
             if alive {
                 e.rays[k] = Ray::new(lane3(&rows.origin, j), lane3(&rows.dir, j));
             }
@@ -269,6 +295,8 @@ struct Step<'a> {
     /// order: each light sample, the BSDF sample, the unused lobe choice.
     sobol: &'a mut SobolLanes,
     sobol_lanes: u32,
+    /// Whether the lanes end the step ([`finish_step`]; every lane's numbers are in `sobol`).
+    finish: bool,
 }
 
 impl IsaOp for Step<'_> {
@@ -286,8 +314,33 @@ impl IsaOp for Step<'_> {
             self.sobol.next_2d(scatter, &mut self.rows.u);
             self.sobol.skip(scatter);
         }
-        step::<I::F8>(self.rows, self.lights, self.groups, self.samples)
+        step::<I::F8>(self.rows, self.lights, self.groups, self.samples);
+        if self.finish {
+            finish_step::<I::F8>(self.rows, self.sobol);
+        }
     }
+}
+
+/// `Integrator::continue_path` of the lanes of `rows.scatter` (weight `albedo`, radiance
+/// scaling 1, not delta), its roulette uniform drawn by `sobol`: `rows.beta` becomes the
+/// throughput after it and `rows.scatter` keeps the lanes that go on. The one-path code's
+/// operations in its order (`max_element` is `maxps`'s `a > b ? a : b`, as `vmax`).
+#[inline(always)]
+fn finish_step<V: Lanes>(rows: &mut StepRows, sobol: &mut SobolLanes) {
+    let (zero, one) = (V::splat(0.0), V::splat(1.0));
+    let max_element = |v: &Vec3x<V>| v.x.vmax(v.y.vmax(v.z));
+    let (beta, albedo) = (Vec3x::<V>::load_rows(&rows.beta), Vec3x::<V>::load_rows(&rows.albedo));
+    let beta = Vec3x { x: beta.x * albedo.x, y: beta.y * albedo.y, z: beta.z * albedo.z };
+    // `eta_scale * 1.0` is `eta_scale`.
+    let eta_scale = V::load(&rows.eta_scale);
+    let goes = V::from_bitmask(rows.scatter) & !max_element(&beta).le(zero);
+    let q = max_element(&(beta * eta_scale));
+    let plays = goes & V::from_bitmask(rows.roulette) & q.lt(one);
+    let mut u = [0.0f32; STEP];
+    sobol.next_1d(plays.bitmask(), &mut u);
+    let goes = goes & !(plays & V::load(&u).ge(q));
+    Vec3x::select(plays, beta / q, beta).store_rows(&mut rows.beta);
+    rows.scatter = goes.bitmask();
 }
 
 /// The light samples of `rows.direct`'s lanes (into `samples`, one per entry of `groups`, the
@@ -416,6 +469,7 @@ mod tests {
                     samples: &mut samples,
                     sobol: &mut SobolLanes::default(),
                     sobol_lanes: 0,
+                    finish: false,
                 };
                 dispatch(isa, step);
                 let lane3 = |r: &Rows<3>, j: usize| Vec3::new(r[0][j], r[1][j], r[2][j]);
