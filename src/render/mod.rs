@@ -388,7 +388,8 @@ fn render_tile(
                     continue;
                 }
                 let pixel = (y0 + i / tw) * w + x0 + i % tw;
-                wavefront.push_samples((taken..pass_end).map(|s| samplers.sampler(pixel, s)));
+                let pixel = samplers.pixel(pixel);
+                wavefront.push_samples((taken..pass_end).map(|s| pixel.sampler(s)));
                 owner.extend(std::iter::repeat_n(i as u32, (pass_end - taken) as usize));
             }
             // One sample goes through the pixel centre; more are jittered uniformly, by the

@@ -79,13 +79,38 @@ impl SamplerSource {
     /// The numbers of sample `index` of pixel `pixel`.
     #[inline]
     pub fn sampler(&self, pixel: usize, index: u32) -> Sampler {
+        self.pixel(pixel).sampler(index)
+    }
+
+    /// The samplers of pixel `pixel`'s samples (what they share computed once).
+    #[inline]
+    pub fn pixel(&self, pixel: usize) -> PixelSamplers {
+        let key = hash32(self.key ^ hash32(pixel as u32) ^ hash32((pixel as u64 >> 32) as u32 ^ 0x68e3_1da4));
+        PixelSamplers { kind: self.kind, streams: self.streams, pixel, key }
+    }
+}
+
+/// The samplers of one pixel's samples ([`SamplerSource::pixel`]).
+#[derive(Clone, Copy, Debug)]
+pub struct PixelSamplers {
+    kind: SamplerKind,
+    streams: RngStreams,
+    pixel: usize,
+    /// The pixel's (and seed's) hash, for the Sobol' scrambles.
+    key: u32,
+}
+
+impl PixelSamplers {
+    /// The numbers of the pixel's sample `index`.
+    #[inline]
+    pub fn sampler(&self, index: u32) -> Sampler {
         match self.kind {
-            SamplerKind::Independent => Sampler::Independent(self.streams.stream(super::sample_stream(pixel, index))),
-            SamplerKind::Sobol => Sampler::Sobol(SobolPath {
-                index_reversed: index.reverse_bits(),
-                key: hash32(self.key ^ hash32(pixel as u32) ^ hash32((pixel as u64 >> 32) as u32 ^ 0x68e3_1da4)),
-                pad: 0,
-            }),
+            SamplerKind::Independent => {
+                Sampler::Independent(self.streams.stream(super::sample_stream(self.pixel, index)))
+            }
+            SamplerKind::Sobol => {
+                Sampler::Sobol(SobolPath { index_reversed: index.reverse_bits(), key: self.key, pad: 0 })
+            }
         }
     }
 }
