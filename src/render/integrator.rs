@@ -31,6 +31,7 @@ use super::{Encoding, RenderSettings};
 use crate::math::Vec3;
 use crate::ray::{Hit, Ray};
 use crate::scene::{Bsdf, Material, Scene, SurfaceHit};
+use crate::simd::{F32x1, Lanes, Vec3x};
 
 mod lanes;
 pub use lanes::{Entries, LaneLights, STEP, SampleLanes};
@@ -157,6 +158,35 @@ impl std::str::FromStr for IntegratorKind {
 
 /// Russian roulette starts at this many bounces.
 const ROULETTE_START: u32 = 2;
+
+/// The throughput arithmetic of a path that scatters, over lanes (one path's on
+/// [`F32x1`], eight in [`Integrator::shade_lanes`]): `beta * weight`, then, of the lanes of
+/// `goes` whose product is not zero, those of `plays` (their depth reached [`ROULETTE_START`])
+/// with `q = max(beta * eta_scale) < 1` play Russian roulette: `uniform` is called once with
+/// those lanes and returns their uniforms (a lane whose uniform is `>= q` ends; the others go on
+/// with `beta / q`). Returns the throughput and the lanes that go on.
+#[inline(always)]
+pub(super) fn throughput_and_roulette<V: Lanes>(
+    beta: Vec3x<V>,
+    weight: Vec3x<V>,
+    eta_scale: V,
+    goes: V,
+    plays: V,
+    uniform: impl FnOnce(V) -> V,
+) -> (Vec3x<V>, V) {
+    let zero = V::splat(0.0);
+    // glam's `max_element`: `max(x, max(y, z))` with `a > b ? a : b`, which is `vmax`.
+    let max_element = |v: &Vec3x<V>| v.x.vmax(v.y.vmax(v.z));
+    let beta = Vec3x { x: beta.x * weight.x, y: beta.y * weight.y, z: beta.z * weight.z };
+    let goes = goes & !max_element(&beta).le(zero);
+    let q = max_element(&(beta * eta_scale));
+    let draws = goes & plays & q.lt(V::splat(1.0));
+    if draws.bitmask() == 0 {
+        return (beta, goes);
+    }
+    let ends = draws & uniform(draws).ge(q);
+    (Vec3x::select(draws, beta / q, beta), goes & !ends)
+}
 
 /// The direct-lighting group of uniform hemisphere samples (`-H`); light sampling's groups
 /// are the lights' indices.
@@ -354,22 +384,24 @@ impl<'a> Integrator<'a> {
     /// counts the bounce and plays Russian roulette. False when the path ends here.
     #[inline]
     fn continue_path(&self, path: &mut PathState, weight: Vec3, eta_scale: f32, delta: bool) -> bool {
-        path.beta *= weight;
         path.eta_scale *= eta_scale;
-        if path.beta.max_element() <= 0.0 {
+        let plays = self.settings.russian_roulette && path.depth + 1 >= ROULETTE_START;
+        let lane = |b: bool| F32x1::from_bitmask(b as u32);
+        let rng = &mut path.rng;
+        let (beta, goes) = throughput_and_roulette(
+            path.beta.into(),
+            weight.into(),
+            F32x1::splat(path.eta_scale),
+            lane(true),
+            lane(plays),
+            |draws| F32x1::splat(if draws.bitmask() != 0 { rng.next_f32() } else { 0.0 }),
+        );
+        path.beta = beta.into();
+        if goes.bitmask() == 0 {
             return false;
         }
         path.depth += 1;
         path.sees_emission = delta;
-        if self.settings.russian_roulette && path.depth >= ROULETTE_START {
-            let q = (path.beta * path.eta_scale).max_element();
-            if q < 1.0 {
-                if path.rng.next_f32() >= q {
-                    return false;
-                }
-                path.beta /= q;
-            }
-        }
         true
     }
 

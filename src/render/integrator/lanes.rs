@@ -14,7 +14,7 @@
 //! continuation ray. The lanes compute the shading frame, the light samples and their shadow
 //! rays, the cosine-weighted bounce direction and the continuation's origin.
 
-use super::{Frame, Integrator, PathState, ROULETTE_START};
+use super::{Frame, Integrator, PathState, ROULETTE_START, throughput_and_roulette};
 use crate::math::Vec3;
 use crate::math::orthonormal_basis_lanes;
 use crate::ray::{Hit, Ray};
@@ -322,24 +322,25 @@ impl IsaOp for Step<'_> {
 }
 
 /// `Integrator::continue_path` of the lanes of `rows.scatter` (weight `albedo`, radiance
-/// scaling 1, not delta), its roulette uniform drawn by `sobol`: `rows.beta` becomes the
-/// throughput after it and `rows.scatter` keeps the lanes that go on. The one-path code's
-/// operations in its order (`max_element` is `maxps`'s `a > b ? a : b`, as `vmax`).
+/// scaling 1, not delta; [`throughput_and_roulette`]), the roulette's uniforms drawn by
+/// `sobol`: `rows.beta` becomes the throughput after it and `rows.scatter` keeps the lanes that
+/// go on.
 #[inline(always)]
 fn finish_step<V: Lanes>(rows: &mut StepRows, sobol: &mut SobolLanes) {
-    let (zero, one) = (V::splat(0.0), V::splat(1.0));
-    let max_element = |v: &Vec3x<V>| v.x.vmax(v.y.vmax(v.z));
-    let (beta, albedo) = (Vec3x::<V>::load_rows(&rows.beta), Vec3x::<V>::load_rows(&rows.albedo));
-    let beta = Vec3x { x: beta.x * albedo.x, y: beta.y * albedo.y, z: beta.z * albedo.z };
-    // `eta_scale * 1.0` is `eta_scale`.
-    let eta_scale = V::load(&rows.eta_scale);
-    let goes = V::from_bitmask(rows.scatter) & !max_element(&beta).le(zero);
-    let q = max_element(&(beta * eta_scale));
-    let plays = goes & V::from_bitmask(rows.roulette) & q.lt(one);
-    let mut u = [0.0f32; STEP];
-    sobol.next_1d(plays.bitmask(), &mut u);
-    let goes = goes & !(plays & V::load(&u).ge(q));
-    Vec3x::select(plays, beta / q, beta).store_rows(&mut rows.beta);
+    let (beta, goes) = throughput_and_roulette(
+        Vec3x::<V>::load_rows(&rows.beta),
+        Vec3x::load_rows(&rows.albedo),
+        // `eta_scale * 1.0` is `eta_scale`.
+        V::load(&rows.eta_scale),
+        V::from_bitmask(rows.scatter),
+        V::from_bitmask(rows.roulette),
+        |draws| {
+            let mut u = [0.0f32; STEP];
+            sobol.next_1d(draws.bitmask(), &mut u);
+            V::load(&u)
+        },
+    );
+    beta.store_rows(&mut rows.beta);
     rows.scatter = goes.bitmask();
 }
 
