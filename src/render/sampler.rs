@@ -239,6 +239,8 @@ impl SobolLanes {
     /// [`Sampler::next_2d`] of the lanes of `mask` into `u[0][j], u[1][j]`; the other lanes
     /// of `u` keep their values.
     #[inline(always)]
+    // Five arrays in lockstep, indexed by lane.
+    #[allow(clippy::needless_range_loop)]
     pub fn next_2d(&mut self, mask: u32, u: &mut [[f32; SOBOL_LANES]; 2]) {
         for j in 0..SOBOL_LANES {
             let (index_reversed, key, pad) = (self.index_reversed[j], self.key[j], self.pad[j]);
