@@ -297,7 +297,10 @@ fn translate(scene: &Scene, a: &Args) -> Result<String, String> {
     for s in 0..sp.len() {
         let mat = &scene.materials[sp.material[s] as usize];
         let Bsdf::Diffuse { albedo } = mat.bsdf else {
-            return Err(format!("sphere {s}: material {:?} is {:?}, not translated (only diffuse)", mat.name, mat.bsdf));
+            return Err(format!(
+                "sphere {s}: material {:?} is {:?}, not translated (only diffuse)",
+                mat.name, mat.bsdf
+            ));
         };
         if mat.is_emissive() {
             return Err(format!("sphere {s}: material {:?} emits; emissive spheres are not translated", mat.name));
