@@ -113,6 +113,16 @@ def render_raypack(a, scene, threads, seed, out):
     return float(m.group(1)) * 1e6
 
 
+def read_exr(mi, dr, path):
+    """raypack's EXR image as an (H, W, 3) array. Mitsuba reads it, with Dr.Jit's pool at 2
+    threads or more: with 1 thread, Mitsuba 3.9's EXR reader never returns."""
+    threads = dr.thread_count()
+    dr.set_thread_count(max(threads, 2))
+    img = np.array(mi.Bitmap(str(path)), dtype=np.float64)[..., :3]
+    dr.set_thread_count(threads)
+    return img
+
+
 def stats(values):
     return {"median": statistics.median(values), "min": min(values), "max": max(values), "all": values}
 
@@ -146,7 +156,7 @@ def compare(a, mi, dr, name, scene_file):
         for r in range(a.rounds):
             exr = a.work / f"raypack-{name}-{threads}-{r}.exr"
             rp_sps.append(render_raypack(a, scene_file, threads, r, exr))
-            rp_img.append(np.array(mi.Bitmap(str(exr)), dtype=np.float64)[..., :3])
+            rp_img.append(read_exr(mi, dr, exr))
             img, secs = render_mitsuba(r)
             mi_sps.append(samples / secs)
             mi_img.append(img)
