@@ -11,7 +11,8 @@ render in turns (raypack, Mitsuba, raypack, ...), round i with seed i, and the s
 
 raypack's figure is the one it prints (its own render clock); Mitsuba's is W*H*spp over the
 `mi.render` call, timed after one warm-up render that compiles the kernels (its time is printed
-too). Mitsuba's threads are Dr.Jit's pool: `drjit.set_thread_count(T)`.
+too). Mitsuba's threads are Dr.Jit's pool: `drjit.set_thread_count(T)`, which counts the calling
+thread (T - 1 workers; 1 runs everything on the calling thread).
 
 The dragon scene (the Stanford dragon on a floor under one area light) is generated at run time
 into the work directory from $RAYPACK_SCENES/models/stanford-dragon-871k.ply and CBbunny.dae.
@@ -173,7 +174,7 @@ def compare(a, mi, dr, name, scene_file):
             "raypack_rmse_seeds": rmse(rp_img), "mitsuba_rmse_seeds": rmse(mi_img),
             "raypack_samples_per_s": stats(rp_sps), "mitsuba_samples_per_s": stats(mi_sps),
             "ratio": statistics.median(rp_sps) / statistics.median(mi_sps),
-            "mitsuba_warmup_s": warmup_s, "mitsuba_load_s": load_s,
+            "mitsuba_warmup_s": warmup_s, "mitsuba_load_s": load_s, "load_average_after": os.getloadavg(),
         })
     return results
 
