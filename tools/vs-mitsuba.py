@@ -107,6 +107,7 @@ def run(cmd):
 def render_raypack(a, scene, threads, seed, out):
     cmd = [a.raypack, "render", scene, "-s", a.spp, "-m", a.depth, "-t", threads, "-r", *a.size]
     cmd += ["-f", out, "--seed", seed, "--bvh-cache", a.work / "bvh-cache"]
+    cmd += ["--sampler", a.sampler] if a.sampler else []
     p = run([str(c) for c in cmd])
     m = SAMPLES.search(p.stderr)
     if not m:
@@ -169,6 +170,7 @@ def compare(a, mi, dr, name, scene_file):
         rmse = lambda imgs: float(np.sqrt(np.mean((imgs[0] - imgs[1]) ** 2)))
         results.append({
             "scene": name, "threads": threads, "width": w, "height": h, "spp": a.spp, "max_depth": a.depth,
+            "raypack_sampler": a.sampler or "default",
             "raypack_mean_rgb": rp_mean.tolist(), "mitsuba_mean_rgb": mi_mean.tolist(),
             "mean_difference_percent": diff.tolist(), "means_agree": bool(np.abs(diff).max() <= MEANS_TOLERANCE),
             "raypack_rmse_seeds": rmse(rp_img), "mitsuba_rmse_seeds": rmse(mi_img),
@@ -205,6 +207,8 @@ def main():
     p.add_argument("-r", "--size", nargs=2, type=int, default=[480, 360], metavar=("W", "H"))
     p.add_argument("-s", "--spp", type=int, default=64)
     p.add_argument("-m", "--depth", type=int, default=5, help="raypack's -m (Mitsuba's max_depth is one more)")
+    p.add_argument("--sampler", choices=["sobol", "independent"],
+                   help="raypack's --sampler (default: raypack's own, Sobol'); Mitsuba's is always independent")
     p.add_argument("--raypack", default=str(ROOT / "target/release/raypack"))
     p.add_argument("--translator", default=str(ROOT / "target/release/mitsuba_scene"))
     p.add_argument("--work", type=Path, help="keep the scenes and images here (default: a temporary directory)")
