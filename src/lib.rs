@@ -80,6 +80,7 @@ mod testing;
 
 pub use bvh::{
     BuildOptions, BuildQuality, BuildQualityError, Bvh8Node, BvhStats, SplitMethod, StreamKernel, TraversalCounts,
+    TreeLayout,
 };
 pub use math::{Aabb, Mat3, Mat4, Vec3};
 pub use ray::{Hit, Ray, RayPacket, RayPacket8, RayPacket16};

@@ -300,3 +300,42 @@ fn empty_and_sphere_only_scenes_round_trip() {
         }
     }
 }
+
+/// Cache files are keyed by the tree layout: a compact build never loads the default tree's
+/// file nor the default build the compact one's, even when one is copied over the other's
+/// name; each layout loads its own file, as its layout, tracing exactly as a fresh build.
+#[test]
+fn cache_files_are_keyed_by_tree_layout() {
+    use raypack::TreeLayout;
+    let dir = tempfile::tempdir().unwrap();
+    let default = BuildOptions::default();
+    let compact = BuildOptions { layout: TreeLayout::Compact, ..BuildOptions::default() };
+    let (dpath, cpath) = (cache_path(&builder(), &default, dir.path()), cache_path(&builder(), &compact, dir.path()));
+    assert_ne!(dpath, cpath);
+    let first = builder().commit_cached(&default, dir.path()).2;
+    assert!(!first.loaded && first.path == dpath && dpath.exists());
+    let (scene, _, report) = builder().commit_cached(&compact, dir.path());
+    assert!(!report.loaded && report.rejected.is_none() && report.path == cpath, "{report:?}");
+    assert_eq!(scene.layout(), TreeLayout::Compact);
+    // The default tree's file under the compact one's name: stale, rebuilt, rewritten.
+    std::fs::copy(&dpath, &cpath).unwrap();
+    let (scene, _, report) = builder().commit_cached(&compact, dir.path());
+    assert!(!report.loaded, "{report:?}");
+    assert!(matches!(report.rejected, Some(CacheError::Stale { .. })), "{report:?}");
+    assert_eq!(scene.layout(), TreeLayout::Compact);
+    let (fresh, _) = builder().commit(&default);
+    for (opts, layout) in [(&compact, TreeLayout::Compact), (&default, TreeLayout::Default)] {
+        let (scene, _, report) = builder().commit_cached(opts, dir.path());
+        assert!(report.loaded && report.warnings().is_empty(), "{layout}: {report:?}");
+        assert_eq!(scene.layout(), layout);
+        for r in random_through_bounds(&fresh.bounds(), 2000, 9) {
+            let (a, b) = (scene.intersect1(&r), fresh.intersect1(&r));
+            assert_eq!(
+                (a.prim, a.t.to_bits(), a.u.to_bits(), a.v.to_bits()),
+                (b.prim, b.t.to_bits(), b.u.to_bits(), b.v.to_bits()),
+                "{layout}"
+            );
+            assert_eq!(scene.occluded1(&r), fresh.occluded1(&r), "{layout}");
+        }
+    }
+}

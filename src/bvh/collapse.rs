@@ -299,7 +299,13 @@ struct Arrays<T> {
 
 impl<T: TriBlock> Arrays<T> {
     fn into_bvh8(self, test: TriangleTest) -> Bvh8<T> {
-        Bvh8 { nodes: self.nodes.into(), tris: self.tris.into(), spheres: self.spheres.into(), test }
+        Bvh8 {
+            nodes: self.nodes.into(),
+            tris: self.tris.into(),
+            ids: Default::default(),
+            spheres: self.spheres.into(),
+            test,
+        }
     }
 }
 
@@ -699,5 +705,5 @@ pub fn collapse_for<T: TriBlock>(
     for (root, &(at, _)) in roots.into_iter().zip(&deferred) {
         nodes_out[at] = root;
     }
-    Bvh8 { nodes: nodes_out, tris: tris_out, spheres: out.spheres.into(), test }
+    Bvh8 { nodes: nodes_out, tris: tris_out, ids: Default::default(), spheres: out.spheres.into(), test }
 }

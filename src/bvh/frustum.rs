@@ -6,13 +6,14 @@
 //! that cannot hit anything.
 
 use crate::bvh::bvh2::SLAB_WIDEN;
-use crate::bvh::bvh8::Bvh8Ref;
+use crate::bvh::bvh8::{Bvh8Ref, LeafBlocks};
 use crate::bvh::node::Bvh8Node;
 use crate::bvh::node::{LeafKind, NodeRef};
 use crate::bvh::stack::{TraversalStack, stack_storage};
 use crate::geometry::{TriBlock, TriangleTest};
 use crate::math::Vec3;
 use crate::simd::{IsaLanes, Lanes, Vec3x};
+use std::borrow::Borrow;
 
 /// The interval bounds of a packet of rays whose direction signs agree on every axis, in
 /// lanes `V` of 8 (one per child slot of a node).
@@ -179,7 +180,7 @@ impl<V: Lanes> Frustum<V> {
     }
 }
 
-impl<T: TriBlock> Bvh8Ref<'_, T> {
+impl<T: TriBlock, L: LeafBlocks<T>> Bvh8Ref<'_, T, L> {
     /// Could a ray of frustum `f` hit a primitive? `false` is exact: no ray of the frustum
     /// hits anything. `true` may be conservative: some triangle's bounding box (or some
     /// sphere leaf's box) meets the frustum, or `budget` inner nodes were visited without
@@ -205,7 +206,7 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
             } else {
                 for (k, b) in cur.blocks().enumerate() {
                     let lanes = cur.lane_mask(k, T::M);
-                    if lanes & f.intersect_triangles::<T, T::Lanes<I>>(&self.tris[b], self.test) != 0 {
+                    if lanes & f.intersect_triangles::<T, T::Lanes<I>>(self.tris.block(b).borrow(), self.test) != 0 {
                         return true;
                     }
                 }

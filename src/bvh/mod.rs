@@ -34,7 +34,7 @@ pub use build::{
     build_bvh2_spatial,
 };
 pub use bvh2::{Bvh2, Bvh2Node};
-pub use bvh8::{Bvh8, Bvh8Stats, DefaultTriBlock};
+pub use bvh8::{Bvh8, Bvh8Ref, Bvh8Stats, CompactLeaves, DefaultTriBlock, LeafBlocks, TreeLayout, TreeLayoutError};
 pub use collapse::{CollapseMethod, CollapseOptions, PrimShape, collapse, collapse_for};
 pub use counters::{Counter, NoCount, TraversalCounts, Work};
 pub use limits::{BVH8_STACK, MAX_DEPTH};

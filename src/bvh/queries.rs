@@ -18,7 +18,7 @@
 //! queries (`StreamQuery`: what a packet and a single ray of each compute).
 
 use crate::bvh::Bvh8;
-use crate::bvh::bvh8::Bvh8Ref;
+use crate::bvh::bvh8::{Bvh8Ref, LeafBlocks};
 use crate::bvh::counters::{Counter, NoCount};
 use crate::bvh::frustum::Frustum;
 use crate::bvh::traverse_packet::{OccluderCache, PacketRays, intersect_hybrid, occluded_hybrid};
@@ -68,19 +68,19 @@ macro_rules! with_kernel {
 /// did not (PERFORMANCE.md, "Descent slots as predicted branches").
 pub const SPECULATION_MAX_BYTES: usize = 5 << 19;
 
-struct Intersect1<'a, T: TriBlock, C> {
-    bvh: &'a Bvh8<T>,
+struct Intersect1<'a, T: TriBlock, L, C> {
+    bvh: Bvh8Ref<'a, T, L>,
     ray: &'a Ray,
     counter: &'a mut C,
 }
 
-impl<T: TriBlock, C: Counter> IsaOp for Intersect1<'_, T, C> {
+impl<T: TriBlock, L: LeafBlocks<T>, C: Counter> IsaOp for Intersect1<'_, T, L, C> {
     type Output = Hit;
     #[inline(always)]
     fn run<I: IsaLanes>(self) -> Hit {
         let mut hit = Hit::MISS;
         if let Some(r) = Ray1::<I::F8>::try_new(self.ray) {
-            let (bvh, mut tfar) = (self.bvh.slices(), r.ray.tfar);
+            let (bvh, mut tfar) = (self.bvh, r.ray.tfar);
             let root = bvh.root();
             if self.bvh.speculates() {
                 with_kernel!(bvh.test, P => bvh.intersect1_from::<I, P, C, true>(&r, root, &mut tfar, &mut hit, self.counter));
@@ -92,13 +92,13 @@ impl<T: TriBlock, C: Counter> IsaOp for Intersect1<'_, T, C> {
     }
 }
 
-struct Occluded1<'a, T: TriBlock, C> {
-    bvh: &'a Bvh8<T>,
+struct Occluded1<'a, T: TriBlock, L, C> {
+    bvh: Bvh8Ref<'a, T, L>,
     ray: &'a Ray,
     counter: &'a mut C,
 }
 
-impl<T: TriBlock, C: Counter> IsaOp for Occluded1<'_, T, C> {
+impl<T: TriBlock, L: LeafBlocks<T>, C: Counter> IsaOp for Occluded1<'_, T, L, C> {
     type Output = bool;
     #[inline(always)]
     fn run<I: IsaLanes>(self) -> bool {
@@ -106,7 +106,7 @@ impl<T: TriBlock, C: Counter> IsaOp for Occluded1<'_, T, C> {
         // features, and this one, too large to inline, ran the kernel's intrinsics as calls.
         match Ray1::<I::F8>::try_new(self.ray) {
             Some(r) => {
-                let bvh = self.bvh.slices();
+                let bvh = self.bvh;
                 with_kernel!(bvh.test, P => bvh.occluded1_from::<I, P, C, true>(&r, bvh.root(), self.counter))
             }
             None => false,
@@ -114,60 +114,60 @@ impl<T: TriBlock, C: Counter> IsaOp for Occluded1<'_, T, C> {
     }
 }
 
-struct ConeMayHit<'a, T: TriBlock> {
-    bvh: &'a Bvh8<T>,
+struct ConeMayHit<'a, T: TriBlock, L> {
+    bvh: Bvh8Ref<'a, T, L>,
     cone: (Vec3, Vec3, Vec3),
 }
 
-impl<T: TriBlock> IsaOp for ConeMayHit<'_, T> {
+impl<T: TriBlock, L: LeafBlocks<T>> IsaOp for ConeMayHit<'_, T, L> {
     type Output = bool;
     #[inline(always)]
     fn run<I: IsaLanes>(self) -> bool {
         let (origin, lo, hi) = self.cone;
         match Frustum::<I::F8>::cone(origin, lo, hi) {
-            Some(f) => self.bvh.slices().frustum_may_hit::<I>(&f, CONE_NODE_BUDGET),
+            Some(f) => self.bvh.frustum_may_hit::<I>(&f, CONE_NODE_BUDGET),
             None => true,
         }
     }
 }
 
-struct IntersectPacket<'a, T: TriBlock, R, C> {
-    bvh: &'a Bvh8<T>,
+struct IntersectPacket<'a, T: TriBlock, L, R, C> {
+    bvh: Bvh8Ref<'a, T, L>,
     packet: &'a mut R,
     valid: u32,
     counter: &'a mut C,
 }
 
-impl<T: TriBlock, R: RayPacket, C: Counter> IsaOp for IntersectPacket<'_, T, R, C> {
+impl<T: TriBlock, L: LeafBlocks<T>, R: RayPacket, C: Counter> IsaOp for IntersectPacket<'_, T, L, R, C> {
     type Output = ();
     #[inline(always)]
     fn run<I: IsaLanes>(self) {
         let (org, dir, tnear, tfar) = self.packet.ray_rows();
         let mut rays = PacketRays::<R::Lanes<I>>::from_rows(org, dir, tnear, tfar, self.valid);
-        let bvh = self.bvh.slices();
-        with_kernel!(bvh.test, P => intersect_hybrid::<_, I, T, P, C>(&bvh, &mut rays, HYBRID_THRESHOLD, self.counter));
+        let bvh = self.bvh;
+        with_kernel!(bvh.test, P => intersect_hybrid::<_, I, T, L, P, C>(&bvh, &mut rays, HYBRID_THRESHOLD, self.counter));
         for i in crate::simd::bits(self.valid & ((1u32 << R::K) - 1)) {
             self.packet.set_result(i, &rays.hit(i));
         }
     }
 }
 
-struct OccludedPacket<'a, T: TriBlock, R, C> {
-    bvh: &'a Bvh8<T>,
+struct OccludedPacket<'a, T: TriBlock, L, R, C> {
+    bvh: Bvh8Ref<'a, T, L>,
     packet: &'a R,
     valid: u32,
     counter: &'a mut C,
 }
 
-impl<T: TriBlock, R: RayPacket, C: Counter> IsaOp for OccludedPacket<'_, T, R, C> {
+impl<T: TriBlock, L: LeafBlocks<T>, R: RayPacket, C: Counter> IsaOp for OccludedPacket<'_, T, L, R, C> {
     type Output = u32;
     #[inline(always)]
     fn run<I: IsaLanes>(self) -> u32 {
         let (org, dir, tnear, tfar) = self.packet.ray_rows();
         let rays = PacketRays::<R::Lanes<I>>::from_rows(org, dir, tnear, tfar, self.valid);
         let mut cache = OccluderCache::default();
-        let bvh = self.bvh.slices();
-        with_kernel!(bvh.test, P => occluded_hybrid::<_, I, T, P, C>(&bvh, &rays, HYBRID_THRESHOLD, &mut cache, self.counter))
+        let bvh = self.bvh;
+        with_kernel!(bvh.test, P => occluded_hybrid::<_, I, T, L, P, C>(&bvh, &rays, HYBRID_THRESHOLD, &mut cache, self.counter))
     }
 }
 
@@ -180,8 +180,8 @@ trait StreamQuery {
     type Carry: Default;
 
     /// Traces packet `p` and writes its answers into `out` (one per ray of `p`).
-    fn packet<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
-        bvh: &Bvh8Ref<'_, T>,
+    fn packet<I: IsaLanes, T: TriBlock, L: LeafBlocks<T>, P: TriangleKernel, C: Counter>(
+        bvh: &Bvh8Ref<'_, T, L>,
         p: &mut PacketRays<I::Stream>,
         carry: &mut Self::Carry,
         out: &mut [Self::Out],
@@ -189,8 +189,8 @@ trait StreamQuery {
     );
 
     /// Traces the rays `rays[i]` for `i` in `ids` as interleaved single rays into `out[i]`.
-    fn interleaved<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
-        bvh: &Bvh8Ref<'_, T>,
+    fn interleaved<I: IsaLanes, T: TriBlock, L: LeafBlocks<T>, P: TriangleKernel, C: Counter>(
+        bvh: &Bvh8Ref<'_, T, L>,
         rays: &[Ray],
         ids: impl Iterator<Item = usize>,
         out: &mut [Self::Out],
@@ -206,20 +206,20 @@ impl StreamQuery for Closest {
     type Carry = ();
 
     #[inline(always)]
-    fn packet<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
-        bvh: &Bvh8Ref<'_, T>,
+    fn packet<I: IsaLanes, T: TriBlock, L: LeafBlocks<T>, P: TriangleKernel, C: Counter>(
+        bvh: &Bvh8Ref<'_, T, L>,
         p: &mut PacketRays<I::Stream>,
         _: &mut (),
         out: &mut [Hit],
         counter: &mut C,
     ) {
-        intersect_hybrid::<_, I, T, P, C>(bvh, p, HYBRID_THRESHOLD, counter);
+        intersect_hybrid::<_, I, T, L, P, C>(bvh, p, HYBRID_THRESHOLD, counter);
         store_stream_hits(p, out);
     }
 
     #[inline(always)]
-    fn interleaved<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
-        bvh: &Bvh8Ref<'_, T>,
+    fn interleaved<I: IsaLanes, T: TriBlock, L: LeafBlocks<T>, P: TriangleKernel, C: Counter>(
+        bvh: &Bvh8Ref<'_, T, L>,
         rays: &[Ray],
         ids: impl Iterator<Item = usize>,
         out: &mut [Hit],
@@ -237,22 +237,22 @@ impl StreamQuery for AnyHit {
     type Carry = OccluderCache;
 
     #[inline(always)]
-    fn packet<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
-        bvh: &Bvh8Ref<'_, T>,
+    fn packet<I: IsaLanes, T: TriBlock, L: LeafBlocks<T>, P: TriangleKernel, C: Counter>(
+        bvh: &Bvh8Ref<'_, T, L>,
         p: &mut PacketRays<I::Stream>,
         cache: &mut OccluderCache,
         out: &mut [bool],
         counter: &mut C,
     ) {
-        let bits = occluded_hybrid::<_, I, T, P, C>(bvh, p, HYBRID_THRESHOLD, cache, counter);
+        let bits = occluded_hybrid::<_, I, T, L, P, C>(bvh, p, HYBRID_THRESHOLD, cache, counter);
         for (i, x) in out.iter_mut().enumerate() {
             *x = bits >> i & 1 != 0;
         }
     }
 
     #[inline(always)]
-    fn interleaved<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
-        bvh: &Bvh8Ref<'_, T>,
+    fn interleaved<I: IsaLanes, T: TriBlock, L: LeafBlocks<T>, P: TriangleKernel, C: Counter>(
+        bvh: &Bvh8Ref<'_, T, L>,
         rays: &[Ray],
         ids: impl Iterator<Item = usize>,
         out: &mut [bool],
@@ -267,8 +267,8 @@ impl StreamQuery for AnyHit {
 /// set aside in `pending` instead of traced, and the op returns where it stopped: the end of
 /// the rays, or the ray after the packet that filled `pending`. (`SET_ASIDE` is a constant so
 /// that the packet-only stream is an instantiation of its own, without the coherence test.)
-struct Stream<'a, T: TriBlock, C, Q: StreamQuery, const SET_ASIDE: bool> {
-    bvh: &'a Bvh8<T>,
+struct Stream<'a, T: TriBlock, L, C, Q: StreamQuery, const SET_ASIDE: bool> {
+    bvh: Bvh8Ref<'a, T, L>,
     rays: &'a [Ray],
     out: &'a mut [Q::Out],
     counter: &'a mut C,
@@ -276,12 +276,14 @@ struct Stream<'a, T: TriBlock, C, Q: StreamQuery, const SET_ASIDE: bool> {
     pending: &'a mut Pending,
 }
 
-impl<T: TriBlock, C: Counter, Q: StreamQuery, const SET_ASIDE: bool> IsaOp for Stream<'_, T, C, Q, SET_ASIDE> {
+impl<T: TriBlock, L: LeafBlocks<T>, C: Counter, Q: StreamQuery, const SET_ASIDE: bool> IsaOp
+    for Stream<'_, T, L, C, Q, SET_ASIDE>
+{
     type Output = usize;
     #[inline(always)]
     fn run<I: IsaLanes>(self) -> usize {
         let k = I::Stream::LANES;
-        let (bvh, rays) = (self.bvh.slices(), self.rays);
+        let (bvh, rays) = (self.bvh, self.rays);
         let mut carry = Q::Carry::default();
         // One length check here, so that `out[batch]` below needs none.
         let out = &mut self.out[..rays.len()];
@@ -291,7 +293,7 @@ impl<T: TriBlock, C: Counter, Q: StreamQuery, const SET_ASIDE: bool> IsaOp for S
                 for (n, (r, o)) in rays[self.from..].chunks(k).zip(out[self.from..].chunks_mut(k)).enumerate() {
                     prefetch_rays(rays, self.from + (n + 2) * k, k);
                     let mut p = PacketRays::<I::Stream>::new_in::<I::F8>(r, u32::MAX);
-                    Q::packet::<I, T, P, C>(&bvh, &mut p, &mut carry, o, self.counter);
+                    Q::packet::<I, T, L, P, C>(&bvh, &mut p, &mut carry, o, self.counter);
                 }
                 return rays.len();
             }
@@ -307,7 +309,7 @@ impl<T: TriBlock, C: Counter, Q: StreamQuery, const SET_ASIDE: bool> IsaOp for S
                     }
                     continue;
                 }
-                Q::packet::<I, T, P, C>(&bvh, &mut p, &mut carry, &mut out[batch], self.counter);
+                Q::packet::<I, T, L, P, C>(&bvh, &mut p, &mut carry, &mut out[batch], self.counter);
             }
             at
         })
@@ -316,20 +318,22 @@ impl<T: TriBlock, C: Counter, Q: StreamQuery, const SET_ASIDE: bool> IsaOp for S
 
 /// Single rays of query `Q`, `rays[i]` for `i` in `ids`, interleaved
 /// ([`crate::bvh::traverse_interleaved`]).
-struct Interleaved<'a, T: TriBlock, C, Q: StreamQuery, R> {
-    bvh: &'a Bvh8<T>,
+struct Interleaved<'a, T: TriBlock, L, C, Q: StreamQuery, R> {
+    bvh: Bvh8Ref<'a, T, L>,
     rays: &'a [Ray],
     ids: R,
     out: &'a mut [Q::Out],
     counter: &'a mut C,
 }
 
-impl<T: TriBlock, C: Counter, Q: StreamQuery, R: Iterator<Item = usize>> IsaOp for Interleaved<'_, T, C, Q, R> {
+impl<T: TriBlock, L: LeafBlocks<T>, C: Counter, Q: StreamQuery, R: Iterator<Item = usize>> IsaOp
+    for Interleaved<'_, T, L, C, Q, R>
+{
     type Output = ();
     #[inline(always)]
     fn run<I: IsaLanes>(self) {
-        let bvh = self.bvh.slices();
-        with_kernel!(bvh.test, P => Q::interleaved::<I, T, P, C>(&bvh, self.rays, self.ids, self.out, self.counter))
+        let bvh = self.bvh;
+        with_kernel!(bvh.test, P => Q::interleaved::<I, T, L, P, C>(&bvh, self.rays, self.ids, self.out, self.counter))
     }
 }
 
@@ -407,40 +411,26 @@ fn prefetch_rays(rays: &[Ray], start: usize, k: usize) {
     }
 }
 
-impl<T: TriBlock> Bvh8<T> {
+impl<T: TriBlock, L: LeafBlocks<T>> Bvh8Ref<'_, T, L> {
     /// Could a ray from `origin` along a positive multiple of a vector in the box
     /// `[dir_lo, dir_hi]` hit a primitive, on ISA `isa`? `false` is exact; `true` may be
     /// conservative, and is the answer whenever the box touches a coordinate plane
     /// ([`Frustum::cone`], [`crate::bvh::bvh8::Bvh8Ref::frustum_may_hit`]).
     pub fn cone_may_hit_with(&self, isa: Isa, origin: Vec3, dir_lo: Vec3, dir_hi: Vec3) -> bool {
-        dispatch(isa, ConeMayHit { bvh: self, cone: (origin, dir_lo, dir_hi) })
-    }
-
-    /// Closest hit along `ray` on the process's default ISA ([`Isa::default_for_process`]).
-    /// Invalid rays miss; sphere hits carry `u = v = 0` (the scene fills them in).
-    #[inline]
-    pub fn intersect1(&self, ray: &Ray) -> Hit {
-        self.intersect1_with(Isa::default_for_process(), ray, &mut NoCount)
-    }
-
-    /// True when anything lies in `[ray.tnear, ray.tfar]`, on the process's default ISA.
-    /// Invalid rays are never occluded.
-    #[inline]
-    pub fn occluded1(&self, ray: &Ray) -> bool {
-        self.occluded1_with(Isa::default_for_process(), ray, &mut NoCount)
+        dispatch(isa, ConeMayHit { bvh: *self, cone: (origin, dir_lo, dir_hi) })
     }
 
     /// [`Bvh8::intersect1`] on `isa`'s kernels (the CPU's best when it lacks `isa`), counting
     /// the work into `counter`.
     #[inline]
     pub fn intersect1_with<C: Counter>(&self, isa: Isa, ray: &Ray, counter: &mut C) -> Hit {
-        dispatch(isa, Intersect1 { bvh: self, ray, counter })
+        dispatch(isa, Intersect1 { bvh: *self, ray, counter })
     }
 
     /// [`Bvh8::occluded1`] on `isa`'s kernels, counting the work into `counter`.
     #[inline]
     pub fn occluded1_with<C: Counter>(&self, isa: Isa, ray: &Ray, counter: &mut C) -> bool {
-        dispatch(isa, Occluded1 { bvh: self, ray, counter })
+        dispatch(isa, Occluded1 { bvh: *self, ray, counter })
     }
 
     /// Closest hits of the packet's rays in the lanes set in `valid`, written back into the
@@ -453,7 +443,7 @@ impl<T: TriBlock> Bvh8<T> {
         valid: u32,
         counter: &mut C,
     ) {
-        dispatch(isa, IntersectPacket { bvh: self, packet, valid, counter })
+        dispatch(isa, IntersectPacket { bvh: *self, packet, valid, counter })
     }
 
     /// Which of the packet's rays in the lanes set in `valid` are blocked (bit `i` for lane
@@ -466,7 +456,7 @@ impl<T: TriBlock> Bvh8<T> {
         valid: u32,
         counter: &mut C,
     ) -> u32 {
-        dispatch(isa, OccludedPacket { bvh: self, packet, valid, counter })
+        dispatch(isa, OccludedPacket { bvh: *self, packet, valid, counter })
     }
 
     /// Closest hits of `rays` into `hits` (same length) on the calling thread, traced as
@@ -510,19 +500,19 @@ impl<T: TriBlock> Bvh8<T> {
         counter: &mut C,
     ) {
         let mut pending = Pending::new();
-        match kernel.resolve(self) {
+        match kernel.resolve_for(self.interleaves()) {
             StreamKernel::Interleaved => {
-                dispatch(isa, Interleaved::<T, C, Q, _> { bvh: self, rays, ids: 0..rays.len(), out, counter });
+                dispatch(isa, Interleaved::<T, L, C, Q, _> { bvh: *self, rays, ids: 0..rays.len(), out, counter });
             }
             StreamKernel::Packets => {
-                let op = Stream::<T, C, Q, false> { bvh: self, rays, out, counter, from: 0, pending: &mut pending };
+                let op = Stream::<T, L, C, Q, false> { bvh: *self, rays, out, counter, from: 0, pending: &mut pending };
                 dispatch(isa, op);
             }
             StreamKernel::Auto | StreamKernel::Hybrid => {
                 let mut at = 0;
                 while at < rays.len() {
-                    let op = Stream::<T, C, Q, true> {
-                        bvh: self,
+                    let op = Stream::<T, L, C, Q, true> {
+                        bvh: *self,
                         rays,
                         out: &mut *out,
                         counter: &mut *counter,
@@ -532,8 +522,13 @@ impl<T: TriBlock> Bvh8<T> {
                     at = dispatch(isa, op);
                     if !pending.is_empty() {
                         let ids = pending.drain();
-                        let op =
-                            Interleaved::<T, C, Q, _> { bvh: self, rays, ids, out: &mut *out, counter: &mut *counter };
+                        let op = Interleaved::<T, L, C, Q, _> {
+                            bvh: *self,
+                            rays,
+                            ids,
+                            out: &mut *out,
+                            counter: &mut *counter,
+                        };
                         dispatch(isa, op);
                     }
                 }
@@ -543,6 +538,105 @@ impl<T: TriBlock> Bvh8<T> {
 
     /// True when the single-ray closest-hit query speculates its descents: in trees of at
     /// most [`SPECULATION_MAX_BYTES`].
+    pub fn speculates(&self) -> bool {
+        self.bytes() <= SPECULATION_MAX_BYTES
+    }
+
+    /// True when the streams interleave the single rays of incoherent packets
+    /// ([`crate::bvh::traverse_interleaved`]): when the tree is larger than the last-level
+    /// cache ([`crate::system::last_level_cache_bytes`]).
+    pub fn interleaves(&self) -> bool {
+        self.bytes() as u64 > crate::system::last_level_cache_bytes()
+    }
+}
+
+/// The queries of a tree in the default layout (a compact tree's read the scene store: its
+/// [`crate::Scene`] queries it, or [`Bvh8::compact_slices`]); each is the query of
+/// [`Bvh8::slices`].
+impl<T: TriBlock> Bvh8<T> {
+    /// Could a ray from `origin` along a positive multiple of a vector in the box
+    /// `[dir_lo, dir_hi]` hit a primitive, on ISA `isa`? ([`Bvh8Ref::cone_may_hit_with`].)
+    pub fn cone_may_hit_with(&self, isa: Isa, origin: Vec3, dir_lo: Vec3, dir_hi: Vec3) -> bool {
+        self.slices().cone_may_hit_with(isa, origin, dir_lo, dir_hi)
+    }
+
+    /// Closest hit along `ray` on the process's default ISA ([`Isa::default_for_process`]).
+    /// Invalid rays miss; sphere hits carry `u = v = 0` (the scene fills them in).
+    #[inline]
+    pub fn intersect1(&self, ray: &Ray) -> Hit {
+        self.intersect1_with(Isa::default_for_process(), ray, &mut NoCount)
+    }
+
+    /// True when anything lies in `[ray.tnear, ray.tfar]`, on the process's default ISA.
+    /// Invalid rays are never occluded.
+    #[inline]
+    pub fn occluded1(&self, ray: &Ray) -> bool {
+        self.occluded1_with(Isa::default_for_process(), ray, &mut NoCount)
+    }
+
+    /// [`Bvh8::intersect1`] on `isa`'s kernels (the CPU's best when it lacks `isa`), counting
+    /// the work into `counter`.
+    #[inline]
+    pub fn intersect1_with<C: Counter>(&self, isa: Isa, ray: &Ray, counter: &mut C) -> Hit {
+        self.slices().intersect1_with(isa, ray, counter)
+    }
+
+    /// [`Bvh8::occluded1`] on `isa`'s kernels, counting the work into `counter`.
+    #[inline]
+    pub fn occluded1_with<C: Counter>(&self, isa: Isa, ray: &Ray, counter: &mut C) -> bool {
+        self.slices().occluded1_with(isa, ray, counter)
+    }
+
+    /// [`Bvh8Ref::intersect_packet_with`].
+    #[inline]
+    pub fn intersect_packet_with<R: RayPacket, C: Counter>(
+        &self,
+        isa: Isa,
+        packet: &mut R,
+        valid: u32,
+        counter: &mut C,
+    ) {
+        self.slices().intersect_packet_with(isa, packet, valid, counter)
+    }
+
+    /// [`Bvh8Ref::occluded_packet_with`].
+    #[inline]
+    pub fn occluded_packet_with<R: RayPacket, C: Counter>(
+        &self,
+        isa: Isa,
+        packet: &R,
+        valid: u32,
+        counter: &mut C,
+    ) -> u32 {
+        self.slices().occluded_packet_with(isa, packet, valid, counter)
+    }
+
+    /// [`Bvh8Ref::intersect_stream_with`].
+    pub fn intersect_stream_with<C: Counter>(
+        &self,
+        isa: Isa,
+        rays: &[Ray],
+        hits: &mut [Hit],
+        kernel: StreamKernel,
+        counter: &mut C,
+    ) {
+        self.slices().intersect_stream_with(isa, rays, hits, kernel, counter)
+    }
+
+    /// [`Bvh8Ref::occluded_stream_with`].
+    pub fn occluded_stream_with<C: Counter>(
+        &self,
+        isa: Isa,
+        rays: &[Ray],
+        occluded: &mut [bool],
+        kernel: StreamKernel,
+        counter: &mut C,
+    ) {
+        self.slices().occluded_stream_with(isa, rays, occluded, kernel, counter)
+    }
+
+    /// True when the single-ray closest-hit query speculates its descents: in trees of at
+    /// most [`SPECULATION_MAX_BYTES`] (nodes and leaf blocks as stored).
     pub fn speculates(&self) -> bool {
         self.bytes() <= SPECULATION_MAX_BYTES
     }
@@ -577,8 +671,13 @@ pub enum StreamKernel {
 impl StreamKernel {
     /// The kernel that runs on `bvh`: [`StreamKernel::Auto`] decided by the tree's size.
     pub fn resolve<T: TriBlock>(self, bvh: &Bvh8<T>) -> StreamKernel {
+        self.resolve_for(bvh.interleaves())
+    }
+
+    /// The kernel that runs on a tree that interleaves ([`Bvh8::interleaves`]) or not.
+    pub(crate) fn resolve_for(self, interleaves: bool) -> StreamKernel {
         match self {
-            StreamKernel::Auto if bvh.interleaves() => StreamKernel::Hybrid,
+            StreamKernel::Auto if interleaves => StreamKernel::Hybrid,
             StreamKernel::Auto => StreamKernel::Packets,
             k => k,
         }

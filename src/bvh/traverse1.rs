@@ -43,7 +43,7 @@
 //! them per ISA tier, triangle test and counter.
 
 use crate::bvh::bvh2::SLAB_WIDEN;
-use crate::bvh::bvh8::Bvh8Ref;
+use crate::bvh::bvh8::{Bvh8Ref, LeafBlocks};
 use crate::bvh::counters::{Counter, Work};
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
 use crate::bvh::stack::{NearEntry, TraversalStack, stack_storage};
@@ -311,16 +311,21 @@ pub(crate) trait SingleRayQuery<I: IsaLanes, T: TriBlock> {
     /// Of the hit children `mask` (not empty) of `node`, with entry distances `dist`, pushes
     /// the ones visited later onto `stack` and returns the child to descend to. `SPECULATE`
     /// and `IN_FLIGHT` as for [`Bvh8Ref::walk1`].
-    fn order<const SPECULATE: bool, const IN_FLIGHT: bool>(
+    fn order<L: LeafBlocks<T>, const SPECULATE: bool, const IN_FLIGHT: bool>(
         &self,
-        bvh: &Bvh8Ref<'_, T>,
+        bvh: &Bvh8Ref<'_, T, L>,
         node: &Bvh8Node,
         mask: u32,
         dist: I::F8,
         stack: &mut TraversalStack<'_, Self::Entry>,
     ) -> NodeRef;
     /// Tests the primitives of `leaf`; `Some` with the answer when the query is done.
-    fn leaf<C: Counter>(&mut self, bvh: &Bvh8Ref<'_, T>, leaf: NodeRef, counter: &mut C) -> Option<Self::Out>;
+    fn leaf<L: LeafBlocks<T>, C: Counter>(
+        &mut self,
+        bvh: &Bvh8Ref<'_, T, L>,
+        leaf: NodeRef,
+        counter: &mut C,
+    ) -> Option<Self::Out>;
     /// The next deferred subtree to visit, dropping the entries that can no longer matter;
     /// `None` when none is left.
     fn pop(&self, stack: &mut TraversalStack<'_, Self::Entry>) -> Option<NodeRef>;
@@ -372,9 +377,9 @@ impl<I: IsaLanes, T: TriBlock, P: TriangleKernel, R: Borrow<Ray1<I::F8>>, H: Bor
     /// ([`push_all_but_nearest`]). When two or more children will be visited they are all
     /// prefetched, unless the tree is small enough to sit in the cache (`SPECULATE`).
     #[inline(always)]
-    fn order<const SPECULATE: bool, const IN_FLIGHT: bool>(
+    fn order<L: LeafBlocks<T>, const SPECULATE: bool, const IN_FLIGHT: bool>(
         &self,
-        bvh: &Bvh8Ref<'_, T>,
+        bvh: &Bvh8Ref<'_, T, L>,
         node: &Bvh8Node,
         mut mask: u32,
         dist: I::F8,
@@ -407,7 +412,12 @@ impl<I: IsaLanes, T: TriBlock, P: TriangleKernel, R: Borrow<Ray1<I::F8>>, H: Bor
     }
 
     #[inline(always)]
-    fn leaf<C: Counter>(&mut self, bvh: &Bvh8Ref<'_, T>, leaf: NodeRef, counter: &mut C) -> Option<Hit> {
+    fn leaf<L: LeafBlocks<T>, C: Counter>(
+        &mut self,
+        bvh: &Bvh8Ref<'_, T, L>,
+        leaf: NodeRef,
+        counter: &mut C,
+    ) -> Option<Hit> {
         let (r, hit) = (self.r.borrow(), self.hit.borrow_mut());
         bvh.intersect_leaf1::<I, P, C>(leaf, r, &self.pre, self.tnear, &mut self.tfar, hit, counter);
         None
@@ -470,9 +480,9 @@ impl<I: IsaLanes, T: TriBlock, P: TriangleKernel, R: Borrow<Ray1<I::F8>>> Single
     }
 
     #[inline(always)]
-    fn order<const SPECULATE: bool, const IN_FLIGHT: bool>(
+    fn order<L: LeafBlocks<T>, const SPECULATE: bool, const IN_FLIGHT: bool>(
         &self,
-        bvh: &Bvh8Ref<'_, T>,
+        bvh: &Bvh8Ref<'_, T, L>,
         node: &Bvh8Node,
         mask: u32,
         _dist: I::F8,
@@ -487,7 +497,12 @@ impl<I: IsaLanes, T: TriBlock, P: TriangleKernel, R: Borrow<Ray1<I::F8>>> Single
     }
 
     #[inline(always)]
-    fn leaf<C: Counter>(&mut self, bvh: &Bvh8Ref<'_, T>, leaf: NodeRef, counter: &mut C) -> Option<bool> {
+    fn leaf<L: LeafBlocks<T>, C: Counter>(
+        &mut self,
+        bvh: &Bvh8Ref<'_, T, L>,
+        leaf: NodeRef,
+        counter: &mut C,
+    ) -> Option<bool> {
         let r = self.r.borrow();
         if bvh.occluded_leaf1::<I, P, C>(leaf, r, &self.pre, self.tnear, self.tfar, counter) {
             Some(true)
@@ -507,7 +522,7 @@ impl<I: IsaLanes, T: TriBlock, P: TriangleKernel, R: Borrow<Ray1<I::F8>>> Single
     }
 }
 
-impl<T: TriBlock> Bvh8Ref<'_, T> {
+impl<T: TriBlock, L: LeafBlocks<T>> Bvh8Ref<'_, T, L> {
     /// The single-ray traversal skeleton: query `q` from the subtree `cur` on. Each step is
     /// an inner node's box test and the query's choice of the child to descend to, or a
     /// leaf's test and the pops after it (or after a node none of whose children is hit).
@@ -537,7 +552,7 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
                 counter.add(Work::Nodes, 1);
                 let (mask, dist) = q.ray().intersect_node(node, q.node_tfar());
                 if mask != 0 {
-                    *cur = q.order::<SPECULATE, IN_FLIGHT>(self, node, mask, dist, stack);
+                    *cur = q.order::<L, SPECULATE, IN_FLIGHT>(self, node, mask, dist, stack);
                     if IN_FLIGHT {
                         return None;
                     }
@@ -647,7 +662,8 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
         counter.add(Work::Blocks, leaf.block_count() as u32);
         match leaf.kind() {
             LeafKind::Triangles => {
-                for block in &self.tris[range] {
+                for block in self.tris.blocks(range) {
+                    let block: &T = block.borrow();
                     let h = P::block(block, pre, tnear, T::Lanes::<I>::splat(*tfar));
                     if let Some(lane) = h.closest() {
                         *tfar = h.t.lane(lane);
@@ -698,9 +714,9 @@ impl<T: TriBlock> Bvh8Ref<'_, T> {
         counter.add(Work::Leaves, 1);
         match leaf.kind() {
             LeafKind::Triangles => {
-                for block in &self.tris[range] {
+                for block in self.tris.blocks(range) {
                     counter.add(Work::Blocks, 1);
-                    if P::block(block, pre, tnear, tfar).mask != 0 {
+                    if P::block(block.borrow(), pre, tnear, tfar).mask != 0 {
                         return true;
                     }
                 }

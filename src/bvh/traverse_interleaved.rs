@@ -19,7 +19,7 @@
 // Measured: PERFORMANCE.md, "Incoherent rays in large trees: several in flight".
 
 use crate::bvh::BVH8_STACK;
-use crate::bvh::bvh8::Bvh8Ref;
+use crate::bvh::bvh8::{Bvh8Ref, LeafBlocks};
 use crate::bvh::counters::Counter;
 use crate::bvh::node::NodeRef;
 use crate::bvh::stack::{TraversalStack, stack_storage};
@@ -60,7 +60,7 @@ impl<I: IsaLanes, T: TriBlock, P: TriangleKernel> Flight<I, T> for Any<I, T, P, 
     }
 }
 
-impl<T: TriBlock> Bvh8Ref<'_, T> {
+impl<T: TriBlock, L: LeafBlocks<T>> Bvh8Ref<'_, T, L> {
     /// Closest hits of the rays `rays[i]` for `i` in `ids`, into `hits[i]`, [`FLIGHTS`] rays
     /// in flight (see the module docs); a ray that is not valid gets [`Hit::MISS`]. Sphere
     /// hits carry `u = v = 0`, as in [`Bvh8Ref::intersect1_from`].

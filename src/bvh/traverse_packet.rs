@@ -41,7 +41,7 @@
 
 use crate::bvh::BVH8_STACK;
 use crate::bvh::bvh2::SLAB_WIDEN;
-use crate::bvh::bvh8::Bvh8Ref;
+use crate::bvh::bvh8::{Bvh8Ref, LeafBlocks};
 use crate::bvh::counters::{Counter, Work};
 use crate::bvh::frustum::Frustum;
 use crate::bvh::node::{Bvh8Node, LeafKind, NodeRef};
@@ -50,6 +50,7 @@ use crate::geometry::sphere_block::sphere_lanes;
 use crate::geometry::{TriBlock, TriangleKernel, TriangleTest};
 use crate::ray::{Hit, Ray};
 use crate::simd::{IsaLanes, Lanes, Transpose8, Vec3x};
+use std::borrow::Borrow;
 use std::mem::MaybeUninit;
 
 /// K rays in lane form with their running closest hits.
@@ -199,9 +200,9 @@ impl<V: Lanes> PacketRays<V> {
     /// triangles the frustum `fr` misses.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn intersect_leaf<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
+    fn intersect_leaf<I: IsaLanes, T: TriBlock, L: LeafBlocks<T>, P: TriangleKernel, C: Counter>(
         &mut self,
-        bvh: &Bvh8Ref<'_, T>,
+        bvh: &Bvh8Ref<'_, T, L>,
         leaf: NodeRef,
         active: u32,
         fr: Option<&Frustum<I::F8>>,
@@ -225,7 +226,8 @@ impl<V: Lanes> PacketRays<V> {
             }
             return;
         }
-        for (k, block) in bvh.tris[range].iter().enumerate() {
+        for (k, block) in bvh.tris.blocks(range).enumerate() {
+            let block: &T = block.borrow();
             for lane in crate::simd::bits(lanes_to_test::<I, T, P, C>(leaf, k, block, fr, counter)) {
                 let (m, t, u, v) = P::broadcast(&block.lane_rows(lane), pre, self.tnear, self.tfar);
                 let m = m & act;
@@ -241,9 +243,9 @@ impl<V: Lanes> PacketRays<V> {
     /// frustum `fr` misses, until every wanted ray is blocked.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn occluded_leaf<I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
+    fn occluded_leaf<I: IsaLanes, T: TriBlock, L: LeafBlocks<T>, P: TriangleKernel, C: Counter>(
         &self,
-        bvh: &Bvh8Ref<'_, T>,
+        bvh: &Bvh8Ref<'_, T, L>,
         leaf: NodeRef,
         active: u32,
         cache: &mut OccluderCache,
@@ -255,7 +257,8 @@ impl<V: Lanes> PacketRays<V> {
         let range = leaf.blocks();
         match leaf.kind() {
             LeafKind::Triangles => {
-                for (k, block) in bvh.tris[range].iter().enumerate() {
+                for (k, block) in bvh.tris.blocks(range).enumerate() {
+                    let block: &T = block.borrow();
                     for lane in crate::simd::bits(lanes_to_test::<I, T, P, C>(leaf, k, block, fr, counter)) {
                         let rows = block.lane_rows(lane);
                         let (m, ..) = P::broadcast(&rows, pre, self.tnear, self.tfar);
@@ -307,8 +310,8 @@ pub fn incoherent_threshold<V: Lanes, I: IsaLanes>() -> usize {
 /// `threshold` lanes are finished lane by lane with the single-ray kernel; leaves test all
 /// wanted rays against one triangle at a time.
 #[inline(always)]
-pub fn intersect_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
-    bvh: &Bvh8Ref<'_, T>,
+pub fn intersect_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, L: LeafBlocks<T>, P: TriangleKernel, C: Counter>(
+    bvh: &Bvh8Ref<'_, T, L>,
     rays: &mut PacketRays<V>,
     threshold: usize,
     counter: &mut C,
@@ -349,7 +352,7 @@ pub fn intersect_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C
                 break 'descend;
             }
             if cur.is_leaf() {
-                rays.intersect_leaf::<I, T, P, C>(bvh, cur, active, frustum.as_ref(), &pre, counter);
+                rays.intersect_leaf::<I, T, L, P, C>(bvh, cur, active, frustum.as_ref(), &pre, counter);
                 break 'descend;
             }
             let node = &bvh.nodes[cur.node_index()];
@@ -485,8 +488,8 @@ const LEAVES_FIRST: bool = true;
 /// Subtrees wanted by at most `threshold` rays are finished ray by ray; leaves test all
 /// wanted rays against one triangle at a time, leaf children of a node before its inner ones.
 #[inline(always)]
-pub fn occluded_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C: Counter>(
-    bvh: &Bvh8Ref<'_, T>,
+pub fn occluded_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, L: LeafBlocks<T>, P: TriangleKernel, C: Counter>(
+    bvh: &Bvh8Ref<'_, T, L>,
     rays: &PacketRays<V>,
     threshold: usize,
     cache: &mut OccluderCache,
@@ -524,7 +527,8 @@ pub fn occluded_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C:
                 break 'descend;
             }
             if cur.is_leaf() {
-                occluded |= rays.occluded_leaf::<I, T, P, C>(bvh, cur, active, cache, frustum.as_ref(), &pre, counter);
+                occluded |=
+                    rays.occluded_leaf::<I, T, L, P, C>(bvh, cur, active, cache, frustum.as_ref(), &pre, counter);
                 break 'descend;
             }
             let node = &bvh.nodes[cur.node_index()];
@@ -563,7 +567,7 @@ pub fn occluded_hybrid<V: Lanes, I: IsaLanes, T: TriBlock, P: TriangleKernel, C:
             for i in crate::simd::bits(leaves) {
                 let m = leaf_masks[i] & !occluded;
                 if m != 0 {
-                    occluded |= rays.occluded_leaf::<I, T, P, C>(
+                    occluded |= rays.occluded_leaf::<I, T, L, P, C>(
                         bvh,
                         node.children[i],
                         m,

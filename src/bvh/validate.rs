@@ -69,7 +69,7 @@ pub fn check_bvh8_indices<T: TriBlock>(b8: &Bvh8<T>, num_prims: usize) -> Result
         return Err("no root".into());
     }
     let prim_ok = |p: u32| p == u32::MAX || (p as usize) < num_prims;
-    if !b8.tris.iter().all(|b| (0..T::M).all(|lane| prim_ok(b.prim(lane))))
+    if !(0..b8.tri_block_count()).all(|k| (0..b8.tri_lanes()).all(|lane| prim_ok(b8.tri_prim(k, lane))))
         || !b8.spheres.iter().all(|b| b.prim.iter().all(|&p| prim_ok(p)))
     {
         return Err("a block refers to a primitive that does not exist".into());
@@ -101,7 +101,7 @@ pub fn check_bvh8_indices<T: TriBlock>(b8: &Bvh8<T>, num_prims: usize) -> Result
                 }
             } else {
                 let (len, m) = match c.kind() {
-                    LeafKind::Triangles => (b8.tris.len(), T::M),
+                    LeafKind::Triangles => (b8.tri_block_count(), b8.tri_lanes()),
                     LeafKind::Spheres => (b8.spheres.len(), Sphere4::M),
                 };
                 let last = c.lanes_of_block(c.block_count().saturating_sub(1), m);
@@ -155,7 +155,7 @@ pub fn validate_bvh8<T: TriBlock>(bvh: &Bvh8<T>, prim_bounds: &[Aabb]) -> Result
     let mut cover = Coverage::new(prim_bounds);
     let mut reached = vec![false; bvh.nodes.len()];
     // The lanes each leaf claims, per block: no lane claimed twice, every used lane claimed.
-    let mut claimed = (vec![0u32; bvh.tris.len()], vec![0u32; bvh.spheres.len()]);
+    let mut claimed = (vec![0u32; bvh.tri_block_count()], vec![0u32; bvh.spheres.len()]);
     let mut stack = vec![0usize];
     while let Some(i) = stack.pop() {
         reached[i] = true;
@@ -177,7 +177,7 @@ pub fn validate_bvh8<T: TriBlock>(bvh: &Bvh8<T>, prim_bounds: &[Aabb]) -> Result
                 continue;
             }
             let (claims, m) = match c.kind() {
-                LeafKind::Triangles => (&mut claimed.0, T::M),
+                LeafKind::Triangles => (&mut claimed.0, bvh.tri_lanes()),
                 LeafKind::Spheres => (&mut claimed.1, Sphere4::M),
             };
             for (k, block) in c.blocks().enumerate() {
@@ -192,9 +192,10 @@ pub fn validate_bvh8<T: TriBlock>(bvh: &Bvh8<T>, prim_bounds: &[Aabb]) -> Result
             cover.leaf(&b, bvh.leaf_prims(c)).map_err(|e| format!("leaf in slot {slot} of node {i}: {e}"))?;
         }
     }
-    let used_tri = |b: &T| (0..T::M).filter(|&l| b.prim(l) != u32::MAX).fold(0u32, |m, l| m | 1 << l);
+    let used_tri =
+        |k: usize| (0..bvh.tri_lanes()).filter(|&l| bvh.tri_prim(k, l) != u32::MAX).fold(0u32, |m, l| m | 1 << l);
     let used_sphere = |b: &Sphere4| (0..Sphere4::M).filter(|&l| b.prim[l] != u32::MAX).fold(0u32, |m, l| m | 1 << l);
-    if let Some(k) = (0..bvh.tris.len()).find(|&k| used_tri(&bvh.tris[k]) & !claimed.0[k] != 0) {
+    if let Some(k) = (0..bvh.tri_block_count()).find(|&k| used_tri(k) & !claimed.0[k] != 0) {
         return Err(format!("triangle block {k} has lanes no leaf holds"));
     }
     if let Some(k) = (0..bvh.spheres.len()).find(|&k| used_sphere(&bvh.spheres[k]) & !claimed.1[k] != 0) {

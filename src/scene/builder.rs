@@ -6,6 +6,7 @@
 //! collinear triangles, non-positive radii) and counts them in the [`CommitReport`], as Embree does.
 //! An empty scene is legal: every ray misses.
 
+use crate::bvh::TreeLayout;
 use crate::bvh::{
     BuildOptions, BuildPrim, BuildQuality, Bvh2, Bvh8, SplitMethod, build_bvh2_kinds, build_bvh2_spatial, collapse_for,
 };
@@ -434,6 +435,9 @@ impl Filtered {
         };
         let test = TriangleTest::from_watertight(opts.watertight);
         scene.bvh8 = collapse_for(&bvh2, |id| scene.prim_shape(id), nt as u32, &opts.collapse, test);
+        if opts.layout == TreeLayout::Compact {
+            scene.bvh8 = std::mem::take(&mut scene.bvh8).into_compact();
+        }
         scene.bvh2 = opts.keep_bvh2.then_some(bvh2);
         scene
     }

@@ -21,6 +21,22 @@ use crate::ray::{Hit, Ray, RayPacket8, RayPacket16};
 use crate::scene::Scene;
 use rayon::prelude::*;
 
+/// Runs `$body` with `$b` the kernels' view of `$scene`'s BVH8: its stored blocks, or, in a
+/// compact tree, its id blocks with the scene store they are built from. The one branch on
+/// the layout per query; each arm instantiates the kernels for its layout.
+macro_rules! with_tree {
+    ($scene:expr, $b:ident => $body:expr) => {{
+        let scene: &Scene = $scene;
+        if scene.bvh8.ids.is_empty() {
+            let $b = scene.bvh8.slices_with(&scene.bvh8.tris[..]);
+            $body
+        } else {
+            let $b = scene.bvh8.compact_slices(&scene.triangles.positions, &scene.triangles.indices);
+            $body
+        }
+    }};
+}
+
 /// Rays per rayon task of the stream queries on the pool (64 packets of 16). Every chunk is a
 /// task of its own (`with_max_len(1)`): rayon's default split stops at about two tasks per
 /// thread and does not split a task once it runs, so a thread could finish its share of a
@@ -148,7 +164,7 @@ macro_rules! packet_queries {
         /// ```
         pub fn $intersect(&self, packet: &mut $packet, valid: $mask) {
             let before = self.has_spheres().then(|| *packet);
-            self.bvh8.intersect_packet_with(self.isa, packet, valid as u32, &mut NoCount);
+            with_tree!(self, b => b.intersect_packet_with(self.isa, packet, valid as u32, &mut NoCount));
             if let Some(before) = before {
                 for i in crate::simd::bits(valid as u32) {
                     let mut h = packet.hit(i);
@@ -175,7 +191,7 @@ macro_rules! packet_queries {
         /// # Ok::<(), raypack::SceneError>(())
         /// ```
         pub fn $occluded(&self, packet: &$packet, valid: $mask) -> $mask {
-            self.bvh8.occluded_packet_with(self.isa, packet, valid as u32, &mut NoCount) as $mask
+            with_tree!(self, b => b.occluded_packet_with(self.isa, packet, valid as u32, &mut NoCount)) as $mask
         }
     };
 }
@@ -273,7 +289,7 @@ impl Scene {
     /// # Ok::<(), raypack::SceneError>(())
     /// ```
     pub fn cone_may_hit(&self, origin: Vec3, dir_lo: Vec3, dir_hi: Vec3) -> bool {
-        self.bvh8.cone_may_hit_with(self.isa, origin, dir_lo, dir_hi)
+        with_tree!(self, b => b.cone_may_hit_with(self.isa, origin, dir_lo, dir_hi))
     }
 }
 
@@ -288,7 +304,7 @@ impl<C: Counter> Counting<'_, C> {
     #[inline]
     pub fn intersect1(&mut self, ray: &Ray) -> Hit {
         let s = self.scene;
-        let mut hit = s.bvh8.intersect1_with(s.isa, ray, self.counter);
+        let mut hit = with_tree!(s, b => b.intersect1_with(s.isa, ray, self.counter));
         s.finish_hit(ray, &mut hit);
         hit
     }
@@ -297,7 +313,7 @@ impl<C: Counter> Counting<'_, C> {
     #[inline]
     pub fn occluded1(&mut self, ray: &Ray) -> bool {
         let s = self.scene;
-        s.bvh8.occluded1_with(s.isa, ray, self.counter)
+        with_tree!(s, b => b.occluded1_with(s.isa, ray, self.counter))
     }
 
     /// [`Scene::intersect_stream`], counted (on the pool, each chunk into a counter of its own,
@@ -309,7 +325,7 @@ impl<C: Counter> Counting<'_, C> {
         assert_eq!(rays.len(), hits.len(), "one hit per ray");
         let (scene, kernel) = (self.scene, opts.kernel);
         let trace = |r: &[Ray], h: &mut [Hit], c: &mut C| {
-            scene.bvh8.intersect_stream_with(scene.isa, r, h, kernel, c);
+            with_tree!(scene, b => b.intersect_stream_with(scene.isa, r, h, kernel, c));
             if opts.sphere_uv && scene.has_spheres() {
                 for (ray, out) in r.iter().zip(h.iter_mut()) {
                     scene.finish_hit(ray, out);
@@ -329,7 +345,7 @@ impl<C: Counter> Counting<'_, C> {
     {
         assert_eq!(rays.len(), occluded.len(), "one answer per ray");
         let (scene, kernel) = (self.scene, opts.kernel);
-        let trace = |r: &[Ray], o: &mut [bool], c: &mut C| scene.bvh8.occluded_stream_with(scene.isa, r, o, kernel, c);
+        let trace = |r: &[Ray], o: &mut [bool], c: &mut C| with_tree!(scene, b => b.occluded_stream_with(scene.isa, r, o, kernel, c));
         match opts.threads {
             Threads::Caller => trace(rays, occluded, self.counter),
             Threads::Pool => par_for_each_chunk(rays, occluded, self.counter, trace),

@@ -25,7 +25,7 @@
 use super::cache::file::{CacheFile, SectionWriter};
 use super::cache::{CacheError, CacheKey, check_accel, push_accel, read_accel};
 use super::{Bsdf, Camera, Light, Material, Scene, SceneBuilder, SpheresSoa, TrianglesSoa};
-use crate::bvh::BuildOptions;
+use crate::bvh::{BuildOptions, TreeLayout};
 use crate::geometry::TriangleTest;
 use crate::math::{Mat3, Vec3};
 use std::path::Path;
@@ -43,8 +43,17 @@ pub struct OptionsRecord {
     /// greedy), `collapse.max_leaf_prims`.
     pub words: [u64; 8],
     /// `spatial_split_budget`, `traversal_cost`, `collapse.node_cost`, `collapse.block_cost`,
-    /// `collapse.prim_cost`, zero.
+    /// `collapse.prim_cost`, `layout` (0 default, 1 compact: the zero of files written before
+    /// the compact layout reads as the default one).
     pub floats: [f32; 6],
+}
+
+/// A tree layout as the options record stores it.
+fn layout_code(l: TreeLayout) -> f32 {
+    match l {
+        TreeLayout::Default => 0.0,
+        TreeLayout::Compact => 1.0,
+    }
 }
 
 impl OptionsRecord {
@@ -61,6 +70,7 @@ impl OptionsRecord {
             watertight,
             collapse: CollapseOptions { method, node_cost, block_cost, prim_cost, max_leaf_prims },
             keep_bvh2,
+            layout,
         } = *o;
         let quality = match quality {
             BuildQuality::Fast => 0,
@@ -87,20 +97,25 @@ impl OptionsRecord {
                 method,
                 w(max_leaf_prims),
             ],
-            floats: [spatial_split_budget, traversal_cost, node_cost, block_cost, prim_cost, 0.0],
+            floats: [spatial_split_budget, traversal_cost, node_cost, block_cost, prim_cost, layout_code(layout)],
         }
     }
 
     fn options(&self) -> Result<BuildOptions, String> {
         use crate::bvh::{BuildQuality, CollapseMethod, CollapseOptions, SplitMethod};
         let [max_leaf_size, bins, quality, split, watertight, keep_bvh2, method, max_leaf_prims] = self.words;
-        let [spatial_split_budget, traversal_cost, node_cost, block_cost, prim_cost, _] = self.floats;
+        let [spatial_split_budget, traversal_cost, node_cost, block_cost, prim_cost, layout] = self.floats;
         let size = |x: u64| usize::try_from(x).map_err(|_| format!("{x} does not fit a usize"));
         let flag = |x: u64| match x {
             0 | 1 => Ok(x == 1),
             _ => Err(format!("{x} is not a flag")),
         };
+        let layout = TreeLayout::ALL
+            .into_iter()
+            .find(|&l| layout_code(l).to_bits() == layout.to_bits())
+            .ok_or_else(|| format!("unknown tree layout {layout}"))?;
         Ok(BuildOptions {
+            layout,
             max_leaf_size: size(max_leaf_size)?,
             bins: Some(size(bins)?).filter(|&b| b > 0),
             quality: match quality {
@@ -312,7 +327,8 @@ impl Scene {
         w.push("mat.names", &names);
         w.push("lights", &lights);
         w.push("camera", &camera);
-        push_accel(&mut w, self, &bounds);
+        let tris = super::cache::stored_blocks(self);
+        push_accel(&mut w, self, &bounds, &tris);
         let mut out = Vec::new();
         w.write_to(key, &mut out).expect("writing to memory does not fail");
         out
@@ -382,6 +398,7 @@ impl Scene {
         accel.bvh8.test = TriangleTest::from_watertight(opts.watertight);
         // The trees verified against the geometry they index (`scene::verify`).
         check_accel(&accel, (&kept.triangles, &kept.spheres)).map_err(malformed)?;
+        let accel = accel.into_layout(opts.layout);
         Ok((kept.with_accel(accel.bounds, accel.bvh2, accel.bvh8), opts))
     }
 }
@@ -433,6 +450,7 @@ mod tests {
             keep_bvh2: watertight,
             quality: if watertight { crate::BuildQuality::High } else { crate::BuildQuality::Fast },
             bins: watertight.then_some(32),
+            layout: if watertight { TreeLayout::Compact } else { TreeLayout::Default },
             ..BuildOptions::default()
         };
         (b.commit(&opts).0, opts)
@@ -450,6 +468,8 @@ mod tests {
             assert_eq!(back.camera, s.camera);
             assert_eq!(back.triangles.positions, s.triangles.positions);
             assert_eq!(back.bvh8.test, s.bvh8.test);
+            assert_eq!((back.layout(), s.layout()), (opts.layout, opts.layout));
+            assert_eq!(back.bvh8.ids, s.bvh8.ids);
             assert_eq!(back.bvh2.is_some(), watertight);
             let rays = crate::raysets::primary_for_scene(&s, 32, 24);
             let (mut a, mut b) = (vec![Hit::MISS; rays.len()], vec![Hit::MISS; rays.len()]);

@@ -2,7 +2,7 @@
 //!
 //! Primitive ids are scene-wide: triangles `0 .. num_triangles()`, then spheres.
 
-use crate::bvh::{Bvh2, Bvh8, BvhStats, NoCount, PrimShape};
+use crate::bvh::{Bvh2, Bvh8, BvhStats, NoCount, PrimShape, TreeLayout};
 use crate::geometry::{
     MollerTrumboreKernel, TriangleKernel, TriangleTest, WatertightKernel, intersect_sphere, sphere::sphere_uv,
 };
@@ -191,6 +191,28 @@ impl Scene {
     /// The 8-wide BVH the SIMD kernels traverse.
     pub fn bvh8(&self) -> &Bvh8 {
         &self.bvh8
+    }
+
+    /// How the BVH8 stores its triangle blocks.
+    pub fn layout(&self) -> TreeLayout {
+        self.bvh8.layout()
+    }
+
+    /// The scene with its BVH8 in `layout`: the same nodes and leaves, the triangle blocks
+    /// stored ([`TreeLayout::Default`]) or as primitive ids ([`TreeLayout::Compact`]); every
+    /// query answers the same, bit for bit.
+    pub fn with_layout(&self, layout: TreeLayout) -> Scene {
+        let mut s = self.clone();
+        if layout != self.layout() {
+            s.bvh8 = match layout {
+                TreeLayout::Compact => s.bvh8.into_compact(),
+                TreeLayout::Default => {
+                    let tris = crate::scene::cache::stored_blocks(self).into_owned();
+                    Bvh8 { tris: tris.into(), ids: Default::default(), ..s.bvh8 }
+                }
+            };
+        }
+        s
     }
 
     /// The instruction-set tier the queries run on: [`Isa::default_for_process`] (the CPU's

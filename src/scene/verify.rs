@@ -69,7 +69,14 @@ impl crate::Scene {
     /// [`verify_accel`] of this scene's own trees: whether they trace exactly as a build of
     /// its geometry would (for trees that did not come from a build in this process).
     pub fn verify_accel(&self) -> Result<(), AccelError> {
-        verify_accel(&self.triangles, &self.spheres, &self.bounds, self.bvh2.as_ref(), &self.bvh8)
+        if self.bvh8.ids.is_empty() {
+            verify_accel(&self.triangles, &self.spheres, &self.bounds, self.bvh2.as_ref(), &self.bvh8)
+        } else {
+            // A compact tree as the blocks its ids name: the tree the kernels trace.
+            let blocks = crate::scene::cache::stored_blocks(self).into_owned();
+            let b8 = crate::bvh::Bvh8 { tris: blocks.into(), ids: Default::default(), ..self.bvh8.clone() };
+            verify_accel(&self.triangles, &self.spheres, &self.bounds, self.bvh2.as_ref(), &b8)
+        }
     }
 }
 

@@ -88,7 +88,8 @@ pub fn on_every_isa(scene: &Scene) -> Vec<(Isa, Scene)> {
 }
 
 /// Every kernel of the registry on `rays`: the scalar references once, each SIMD kernel on
-/// every ISA tier of [`on_every_isa`]. Returns `(name [isa], results)`.
+/// every ISA tier of [`on_every_isa`] and in every tree layout (`raypack::TreeLayout::ALL`). Returns
+/// `(name [isa], results)`, with `, compact` after the ISA for the compact tree.
 pub fn every_kernel(scene: &Scene, rays: &[Ray]) -> Vec<(String, Results)> {
     every_kernel_where(scene, rays, |_| true)
 }
@@ -102,10 +103,16 @@ pub fn every_kernel_where(scene: &Scene, rays: &[Ray], keep: impl Fn(&Kernel) ->
     };
     let mut out: Vec<(String, Results)> =
         KERNELS.iter().filter(|k| !k.simd && keep(k)).map(|k| (k.name.to_string(), run(scene, k))).collect();
-    for (isa, s) in on_every_isa(scene) {
-        out.extend(
-            raypack::kernels::simd_kernels().filter(|k| keep(k)).map(|k| (format!("{} [{isa}]", k.name), run(&s, k))),
-        );
+    for layout in raypack::TreeLayout::ALL {
+        let scene = scene.with_layout(layout);
+        let tag = if layout == raypack::TreeLayout::Default { String::new() } else { format!(", {layout}") };
+        for (isa, s) in on_every_isa(&scene) {
+            out.extend(
+                raypack::kernels::simd_kernels()
+                    .filter(|k| keep(k))
+                    .map(|k| (format!("{} [{isa}{tag}]", k.name), run(&s, k))),
+            );
+        }
     }
     out
 }

@@ -114,6 +114,10 @@ pub struct BuildOptions {
     /// kernels only traverse the 8-wide BVH, and the binary one costs more than half as much
     /// memory again (PERFORMANCE.md, "Builder").
     pub keep_bvh2: bool,
+    /// How the 8-wide BVH stores its triangle blocks: [`TreeLayout::Default`] (the vectors of
+    /// each triangle) or [`TreeLayout::Compact`] (primitive ids, the blocks built from the
+    /// scene store as the kernels reach them: the smallest tree, the same hits).
+    pub layout: crate::bvh::TreeLayout,
 }
 
 impl Default for BuildOptions {
@@ -128,6 +132,7 @@ impl Default for BuildOptions {
             watertight: false,
             collapse: crate::bvh::CollapseOptions::default(),
             keep_bvh2: false,
+            layout: crate::bvh::TreeLayout::Default,
         }
     }
 }

@@ -280,6 +280,7 @@ impl SceneBuilder {
             Ok(Some((accel, copied))) => {
                 cache.loaded = true;
                 cache.copied = copied;
+                let accel = accel.into_layout(opts.layout);
                 return (kept.with_accel(accel.bounds, accel.bvh2, accel.bvh8), report, cache);
             }
             Ok(None) => {}
@@ -292,12 +293,35 @@ impl SceneBuilder {
     }
 }
 
+/// The triangle blocks of `scene`'s BVH8 in the default layout: its own, or those its id
+/// blocks name, built as the kernels build them (so a file holds the same bytes either way).
+pub(crate) fn stored_blocks(scene: &Scene) -> std::borrow::Cow<'_, [Tri8]> {
+    let b = &scene.bvh8;
+    if b.ids.is_empty() {
+        std::borrow::Cow::Borrowed(&b.tris[..])
+    } else {
+        let t = &scene.triangles;
+        std::borrow::Cow::Owned(b.ids.iter().map(|ids| ids.tri8(&t.positions, &t.indices, b.test)).collect())
+    }
+}
+
 /// The acceleration structures a cache file holds.
 pub(crate) struct Accel {
     pub(crate) bounds: Aabb,
     /// Stored as empty sections when the build did not keep it.
     pub(crate) bvh2: Option<Bvh2>,
     pub(crate) bvh8: Bvh8,
+}
+
+impl Accel {
+    /// The structures with the BVH8 in `layout` (files hold the default layout's blocks,
+    /// verified before this).
+    pub(crate) fn into_layout(mut self, layout: crate::bvh::TreeLayout) -> Self {
+        if layout == crate::bvh::TreeLayout::Compact {
+            self.bvh8 = self.bvh8.into_compact();
+        }
+        self
+    }
 }
 
 /// The largest cache file read for a scene of `num_prims` primitives: far above what a build
@@ -442,6 +466,7 @@ pub(crate) fn read_accel(f: &CacheFile) -> Result<Accel, CacheError> {
         bvh8: Bvh8 {
             nodes: f.section_in_place::<Bvh8Node>("bvh8.nodes")?,
             tris: f.section_in_place::<DefaultTriBlock>("bvh8.tris")?,
+            ids: Default::default(),
             spheres: f.section_in_place::<Sphere4>("bvh8.spheres")?,
             // Set from the options by the caller (the key covers them).
             test: TriangleTest::default(),
@@ -475,7 +500,8 @@ fn store(dir: &Path, path: &Path, key: CacheKey, scene: &Scene) -> Result<(), Ca
     crate::fs::output::remove_stale_temporaries(path);
     let mut w = SectionWriter::new();
     let bounds = [scene.bounds];
-    push_accel(&mut w, scene, &bounds);
+    let tris = stored_blocks(scene);
+    push_accel(&mut w, scene, &bounds, &tris);
     // Readable by the other users of a shared cache; only a regular file is replaced.
     let opts = OutputOptions { mode: 0o644, exact_mode: true, allow_fifo: false, sync: false, ..Default::default() };
     let mut w = Some(w);
@@ -488,13 +514,17 @@ fn store(dir: &Path, path: &Path, key: CacheKey, scene: &Scene) -> Result<(), Ca
 
 /// Adds the sections of `scene`'s acceleration structures (`bounds` is `[scene.bounds]`):
 /// what [`read_accel`] reads.
-pub(crate) fn push_accel<'a>(w: &mut SectionWriter<'a>, scene: &'a Scene, bounds: &'a [Aabb; 1]) {
+///
+/// A compact tree ([`crate::bvh::TreeLayout::Compact`]) is written as the default layout's
+/// blocks (`tris`: [`stored_blocks`]), which the verification of a load checks as it checks
+/// any tree; the reader turns them back into id blocks ([`Accel::into_layout`]).
+pub(crate) fn push_accel<'a>(w: &mut SectionWriter<'a>, scene: &'a Scene, bounds: &'a [Aabb; 1], tris: &'a [Tri8]) {
     w.push("bounds", bounds);
     let (nodes, prims) = scene.bvh2.as_ref().map_or((&[][..], &[][..]), |b| (&b.nodes[..], &b.prim_ids[..]));
     w.push("bvh2.nodes", nodes);
     w.push("bvh2.prims", prims);
     w.push("bvh8.nodes", &scene.bvh8.nodes);
-    w.push("bvh8.tris", &scene.bvh8.tris);
+    w.push("bvh8.tris", tris);
     w.push("bvh8.spheres", &scene.bvh8.spheres);
 }
 
