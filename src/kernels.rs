@@ -11,6 +11,11 @@
 //! bench`, the benchmarks and the Embree cross-check all trace through this module, so they
 //! time and compare the same calls.
 //!
+//! The tree layout ([`crate::TreeLayout`]) is the scene's, as its ISA is: the same kernels run
+//! on a compact tree through the scene built with it, or [`Scene::with_layout`]; the kernel
+//! tests and the Embree cross-check run every kernel on both layouts, and `raypack bench
+//! --layout default,compact` times both.
+//!
 //! ```
 //! use raypack::kernels::{KERNELS, Results};
 //! use raypack::{BuildOptions, Isa, Material, Ray, SceneBuilder, Vec3};

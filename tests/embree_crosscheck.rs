@@ -486,6 +486,9 @@ fn crosscheck_isas(name: &str, scene: &Scene, sets: &[RaySet], robust: bool, eve
             (i, s)
         })
         .collect();
+    // The compact tree layout on the scene's tier (tests/bvh8.rs checks it bit for bit against
+    // the default layout on every tier).
+    let compact = scene.with_layout(raypack::TreeLayout::Compact);
     // The reference first, then every kernel on the scene's ISA, then on every other tier.
     let mut methods = raypack_methods(scene);
     for m in &mut methods {
@@ -497,6 +500,10 @@ fn crosscheck_isas(name: &str, scene: &Scene, sets: &[RaySet], robust: bool, eve
             m
         }));
     }
+    methods.extend(raypack_methods(&compact).into_iter().filter(|m| !m.name.contains("reference")).map(|mut m| {
+        m.name = format!("{} [{}, compact]", m.name, scene.isa());
+        m
+    }));
     methods.extend(embree_methods(&medium, &format!(" (medium{flags})")));
     methods.extend(
         embree_methods(&high, &format!(" (high{flags})"))

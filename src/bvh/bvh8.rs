@@ -107,7 +107,8 @@ pub trait LeafBlocks<T: TriBlock>: Copy {
     fn is_empty(self) -> bool {
         self.len() == 0
     }
-    /// Bytes of the blocks as stored.
+    /// Bytes the kernels read for the blocks: the stored blocks, or the id blocks and the
+    /// scene store's arrays they are built from.
     fn bytes(self) -> usize;
     /// Asks the cache for the stored data of block `first` and, when `two`, of the block after
     /// it.
@@ -207,7 +208,7 @@ impl<'a> LeafBlocks<Tri8> for CompactLeaves<'a> {
 
     #[inline(always)]
     fn bytes(self) -> usize {
-        std::mem::size_of_val(self.ids)
+        std::mem::size_of_val(self.ids) + std::mem::size_of_val(self.positions) + std::mem::size_of_val(self.indices)
     }
 
     #[inline(always)]
@@ -246,7 +247,9 @@ impl<T: TriBlock, L: LeafBlocks<T>> Bvh8Ref<'_, T, L> {
         NodeRef::inner(0)
     }
 
-    /// Bytes of nodes and leaf blocks as stored.
+    /// Bytes the kernels read: nodes, leaf blocks ([`LeafBlocks::bytes`]: in a compact tree
+    /// with the scene store's arrays the blocks are built from) and sphere blocks. The
+    /// streams' and the single-ray query's choices by the tree's size go by it.
     pub fn bytes(&self) -> usize {
         std::mem::size_of_val(self.nodes) + self.tris.bytes() + std::mem::size_of_val(self.spheres)
     }
@@ -287,6 +290,10 @@ pub struct Bvh8Stats {
     pub block_fill: f64,
     /// Bytes of nodes and blocks.
     pub bytes: usize,
+    /// Bytes of the inner nodes (the rest of `bytes` is leaf blocks).
+    pub node_bytes: usize,
+    /// How the triangle blocks are stored.
+    pub layout: TreeLayout,
     /// SAH cost (unit node and block costs, relative to the root's area).
     pub sah_cost: f64,
     /// Deepest level of inner nodes (root = 1).
@@ -371,6 +378,8 @@ impl<T: TriBlock> Bvh8<T> {
             tri_blocks: self.tri_block_count(),
             sphere_blocks: self.spheres.len(),
             bytes: self.bytes(),
+            node_bytes: std::mem::size_of_val(&self.nodes[..]),
+            layout: self.layout(),
             ..Default::default()
         };
         let root_area = self.nodes[0].bounds().half_area() as f64;

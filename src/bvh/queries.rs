@@ -636,14 +636,16 @@ impl<T: TriBlock> Bvh8<T> {
     }
 
     /// True when the single-ray closest-hit query speculates its descents: in trees of at
-    /// most [`SPECULATION_MAX_BYTES`] (nodes and leaf blocks as stored).
+    /// most [`SPECULATION_MAX_BYTES`] (nodes and leaf blocks as stored; a compact tree's
+    /// kernels read the scene store as well: [`crate::Scene::speculates`]).
     pub fn speculates(&self) -> bool {
         self.bytes() <= SPECULATION_MAX_BYTES
     }
 
     /// True when the streams interleave the single rays of incoherent packets
     /// ([`crate::bvh::traverse_interleaved`]): when the tree is larger than the last-level
-    /// cache ([`crate::system::last_level_cache_bytes`]).
+    /// cache ([`crate::system::last_level_cache_bytes`]); of a compact tree:
+    /// [`crate::Scene::interleaves`].
     pub fn interleaves(&self) -> bool {
         self.bytes() as u64 > crate::system::last_level_cache_bytes()
     }

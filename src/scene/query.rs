@@ -197,6 +197,20 @@ macro_rules! packet_queries {
 }
 
 impl Scene {
+    /// True when the streams interleave the single rays of incoherent packets: when what the
+    /// kernels read (the BVH8, and in a compact tree the scene store's positions and indices
+    /// its blocks are built from) is larger than the last-level cache
+    /// ([`crate::bvh::Bvh8Ref::interleaves`]).
+    pub fn interleaves(&self) -> bool {
+        with_tree!(self, b => b.interleaves())
+    }
+
+    /// True when the single-ray closest-hit query speculates its descents (what the kernels
+    /// read is small: [`crate::bvh::Bvh8Ref::speculates`]).
+    pub fn speculates(&self) -> bool {
+        with_tree!(self, b => b.speculates())
+    }
+
     packet_queries!(intersect8, occluded8, RayPacket8, u8, "8");
     packet_queries!(intersect16, occluded16, RayPacket16, u16, "16");
 

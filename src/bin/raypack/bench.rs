@@ -110,13 +110,18 @@ pub(crate) fn cmd_bench(a: BenchArgs) -> Result<(), CliError> {
     print_warnings(&warnings);
     let mut trees = Vec::new();
     let mut tree_opts = Vec::new();
-    for (k, &q) in a.qualities().iter().enumerate() {
-        let quality = q;
+    let layouts = if a.layout.is_empty() { vec![raypack::TreeLayout::Default] } else { a.layout.clone() };
+    let builds = a.qualities().into_iter().flat_map(|q| layouts.iter().map(move |&l| (q, l)));
+    for (k, (quality, layout)) in builds.enumerate() {
         // The first tree's binary BVH stays for the reference rows and the checksums they
         // anchor.
-        let opts = BuildOptions { quality, watertight: a.watertight, keep_bvh2: k == 0, ..BuildOptions::default() };
+        let opts =
+            BuildOptions { quality, watertight: a.watertight, keep_bvh2: k == 0, layout, ..BuildOptions::default() };
         let (scene, build) = build_timed(&builder, &opts, &a)?;
-        let name = quality.name().to_string();
+        let name = match layout {
+            raypack::TreeLayout::Default => quality.name().to_string(),
+            _ => format!("{} {layout}", quality.name()),
+        };
         trees.push(RaypackTree { quality: name, scene, build });
         tree_opts.push(opts);
     }

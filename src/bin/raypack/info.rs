@@ -4,7 +4,7 @@
 
 use crate::say;
 use crate::{CliError, InfoArgs, print_warnings};
-use raypack::bvh::{BuildOptions, BuildQuality, Bvh8Stats, BvhStats};
+use raypack::bvh::{BuildOptions, BuildQuality, Bvh8Stats, BvhStats, TreeLayout};
 use raypack::io::LoadError;
 use raypack::math::Aabb;
 use raypack::scene::footprint::store_bytes;
@@ -20,6 +20,8 @@ use std::time::Instant;
 pub struct InfoOptions {
     /// Build qualities to time, in order.
     pub qualities: Vec<BuildQuality>,
+    /// Tree layouts to build at each quality, in order.
+    pub layouts: Vec<TreeLayout>,
     /// The loader's limits.
     pub load: raypack::io::LoadOptions,
     /// Commit through the BVH cache in this directory ([`SceneBuilder::commit_cached`]).
@@ -46,6 +48,7 @@ impl Default for InfoOptions {
     fn default() -> Self {
         Self {
             qualities: vec![BuildQuality::Fast, BuildQuality::Medium, BuildQuality::High],
+            layouts: vec![TreeLayout::Default],
             load: raypack::io::LoadOptions::default(),
             cache_dir: None,
             validate: false,
@@ -62,6 +65,8 @@ impl Default for InfoOptions {
 pub struct BuildInfo {
     /// The quality asked for.
     pub quality: BuildQuality,
+    /// The tree layout asked for.
+    pub layout: TreeLayout,
     /// Wall-clock seconds of the commit (filtering, then building or loading from the cache).
     pub seconds: f64,
     /// True when the structures came from the BVH cache.
@@ -183,10 +188,12 @@ pub fn scene_info(path: Option<&Path>, opts: &InfoOptions) -> Result<SceneInfo, 
         info.embree_builds = embree_builds(&triangles, spheres, opts.isa)?;
     }
     let mut builder = Some(builder);
-    for (i, &quality) in opts.qualities.iter().enumerate() {
-        let last = i + 1 == opts.qualities.len();
+    let builds: Vec<(BuildQuality, TreeLayout)> =
+        opts.qualities.iter().flat_map(|&q| opts.layouts.iter().map(move |&l| (q, l))).collect();
+    for (i, &(quality, layout)) in builds.iter().enumerate() {
+        let last = i + 1 == builds.len();
         let b: SceneBuilder = if last { builder.take().expect("builder") } else { builder.clone().expect("builder") };
-        let build_opts = BuildOptions { quality, keep_bvh2: opts.keep_bvh2, ..BuildOptions::default() };
+        let build_opts = BuildOptions { quality, keep_bvh2: opts.keep_bvh2, layout, ..BuildOptions::default() };
         let peak = PeakResident::start();
         let t = Instant::now();
         let (scene, report, cache) = match &opts.cache_dir {
@@ -218,6 +225,7 @@ pub fn scene_info(path: Option<&Path>, opts: &InfoOptions) -> Result<SceneInfo, 
         });
         info.builds.push(BuildInfo {
             quality,
+            layout,
             seconds,
             from_cache: cache.as_ref().is_some_and(|c| c.loaded),
             cache_warnings: cache.map(|c| c.warnings()).unwrap_or_default(),
@@ -226,8 +234,8 @@ pub fn scene_info(path: Option<&Path>, opts: &InfoOptions) -> Result<SceneInfo, 
             bvh2_bytes: scene.bvh2().map_or(0, |b| b.bytes()),
             valid,
             peak_added_bytes,
-            interleaves: scene.bvh8().interleaves(),
-            speculates: scene.bvh8().speculates(),
+            interleaves: scene.interleaves(),
+            speculates: scene.speculates(),
         });
         if last && opts.against_embree && !opts.embree_first {
             info.embree_builds = embree_builds(&scene.triangles, scene.num_spheres(), opts.isa)?;
@@ -314,7 +322,11 @@ impl SceneInfo {
         let _ = writeln!(s, "isa          {} (the CPU's best: {})", self.isa, Isa::detected());
         for bi in &self.builds {
             let how = if bi.from_cache { "loaded from the BVH cache" } else { "built" };
-            let _ = writeln!(s, "{:<12} {:.4} s, {how}", format!("build {}", bi.quality.name()), bi.seconds);
+            let name = match bi.layout {
+                TreeLayout::Default => format!("build {}", bi.quality.name()),
+                layout => format!("build {} {layout}", bi.quality.name()),
+            };
+            let _ = writeln!(s, "{name:<12} {:.4} s, {how}", bi.seconds);
             match &bi.bvh2 {
                 Some(b) => {
                     let _ = writeln!(s, "  bvh2       {b}");
@@ -335,6 +347,15 @@ impl SceneInfo {
             } else {
                 writeln!(s)
             };
+            let leaves = bi.bvh8.bytes - bi.bvh8.node_bytes;
+            let _ = writeln!(
+                s,
+                "  layout     {}: nodes {:.1} + leaves {:.1} bytes/triangle (+ scene store {:.1})",
+                bi.bvh8.layout,
+                self.per_triangle(bi.bvh8.node_bytes),
+                self.per_triangle(leaves),
+                self.per_triangle(self.store_bytes)
+            );
             if let Some(p) = bi.peak_added_bytes {
                 let _ = writeln!(s, "  peak       +{} resident during the commit", mb(p as usize));
             }
@@ -388,6 +409,7 @@ impl SceneInfo {
             .map(|bi| {
                 json!({
                     "quality": bi.quality.name(),
+                    "layout": bi.bvh8.layout.name(),
                     "seconds": bi.seconds,
                     "from_cache": bi.from_cache,
                     "cache_warnings": bi.cache_warnings,
@@ -411,6 +433,8 @@ impl SceneInfo {
                         "depth": bi.bvh8.depth,
                         "bytes": bi.bvh8.bytes,
                         "bytes_per_triangle": self.per_triangle(bi.bvh8.bytes),
+                        "node_bytes": bi.bvh8.node_bytes,
+                        "leaf_bytes": bi.bvh8.bytes - bi.bvh8.node_bytes,
                     },
                     "valid": bi.valid.as_ref().map(|v| v.clone().err().unwrap_or_else(|| "ok".into())),
                     "peak_added_bytes": bi.peak_added_bytes,
@@ -460,6 +484,9 @@ pub(crate) fn cmd_info(a: InfoArgs) -> Result<(), CliError> {
     };
     if let Some(q) = a.quality {
         opts.qualities = vec![q];
+    }
+    if !a.layout.is_empty() {
+        opts.layouts = a.layout.clone();
     }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.unwrap_or(0))

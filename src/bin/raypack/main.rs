@@ -130,6 +130,12 @@ struct BenchArgs {
     /// medium; with `--against embree`, medium and high, as Embree's MEDIUM and HIGH.
     #[arg(long, value_parser = quality_parser(), value_delimiter = ',')]
     quality: Vec<BuildQuality>,
+    /// raypack's tree layouts, comma-separated (`default`, `compact`: leaf blocks of triangle
+    /// ids, the triangles read from the scene store; the smallest tree, the same hits): each
+    /// quality's tree is built in each, a compact tree's methods named `(QUALITY compact)`.
+    /// Default: default.
+    #[arg(long, value_parser = layout_parser(), value_delimiter = ',')]
+    layout: Vec<raypack::TreeLayout>,
     /// Load the BVH from (or save it to) a cache file in this directory.
     #[arg(long, value_name = "DIR")]
     bvh_cache: Option<PathBuf>,
@@ -261,6 +267,10 @@ struct RenderArgs {
     /// BVH build effort.
     #[arg(long, value_parser = quality_parser(), default_value_t = BuildQuality::Medium)]
     quality: BuildQuality,
+    /// How the BVH stores its triangles: `default`, or `compact` (leaf blocks of triangle ids,
+    /// the triangles read from the scene store: the smallest tree, the same image).
+    #[arg(long, value_parser = layout_parser(), default_value_t = raypack::TreeLayout::Default)]
+    layout: raypack::TreeLayout,
     /// Load the BVH from (or save it to) a cache file in this directory.
     #[arg(long, value_name = "DIR")]
     bvh_cache: Option<PathBuf>,
@@ -307,6 +317,13 @@ fn ray_order_parser() -> impl clap::builder::TypedValueParser<Value = raypack::r
         .try_map(|name| RayOrder::ALL.into_iter().find(|o| o.name() == name).ok_or("not an order"))
 }
 
+/// `--layout`'s parser: the library's names ([`raypack::TreeLayout::name`]), listed in `--help`.
+fn layout_parser() -> impl clap::builder::TypedValueParser<Value = raypack::TreeLayout> {
+    use clap::builder::TypedValueParser as _;
+    clap::builder::PossibleValuesParser::new(raypack::TreeLayout::ALL.map(raypack::TreeLayout::name))
+        .try_map(|s| raypack::TreeLayout::parse(&s))
+}
+
 /// `--quality`'s parser: the library's names ([`BuildQuality::name`]), listed in `--help`.
 fn quality_parser() -> impl clap::builder::TypedValueParser<Value = BuildQuality> {
     use clap::builder::TypedValueParser as _;
@@ -337,6 +354,10 @@ struct InfoArgs {
     /// Only this build quality (default: fast, medium and high).
     #[arg(long, value_parser = quality_parser())]
     quality: Option<BuildQuality>,
+    /// Tree layouts to build, comma-separated (`default`, `compact`: leaf blocks of triangle
+    /// ids), each reported with its bytes per triangle [default: default].
+    #[arg(long, value_parser = layout_parser(), value_delimiter = ',')]
+    layout: Vec<raypack::TreeLayout>,
     /// Load the BVHs from (or save them to) cache files in this directory.
     #[arg(long, value_name = "DIR")]
     bvh_cache: Option<PathBuf>,

@@ -152,7 +152,8 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), CliError> {
             say::done(format_args!("Done! ({load_time:.4} sec)"));
         }
         print_warnings(&warnings);
-        let opts = BuildOptions { quality: a.quality, watertight: a.watertight, ..BuildOptions::default() };
+        let opts =
+            BuildOptions { quality: a.quality, watertight: a.watertight, layout: a.layout, ..BuildOptions::default() };
         let t = Instant::now();
         let mut scene = commit(builder, &opts, a.bvh_cache.as_deref(), quiet);
         let setup_time = [("load", load_time), ("BVH build", t.elapsed().as_secs_f64())];
