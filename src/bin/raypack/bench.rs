@@ -35,7 +35,10 @@ fn build_timed(builder: &SceneBuilder, opts: &BuildOptions, a: &BenchArgs) -> Re
     }
     let build = BuildFigures::from_times(
         "raypack",
-        format!("bvh8 {} {}", opts.quality.name(), scene.triangle_test().name()),
+        match opts.layout {
+            raypack::TreeLayout::Default => format!("bvh8 {} {}", opts.quality.name(), scene.triangle_test().name()),
+            layout => format!("bvh8 {} {} {layout}", opts.quality.name(), scene.triangle_test().name()),
+        },
         &[time],
         raypack_accel_bytes(&scene) as u64,
     );
