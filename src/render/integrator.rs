@@ -159,33 +159,43 @@ impl std::str::FromStr for IntegratorKind {
 /// Russian roulette starts at this many bounces.
 const ROULETTE_START: u32 = 2;
 
-/// The throughput arithmetic of a path that scatters, over lanes (one path's on
-/// [`F32x1`], eight in [`Integrator::shade_lanes`]): `beta * weight`, then, of the lanes of
-/// `goes` whose product is not zero, those of `plays` (their depth reached [`ROULETTE_START`])
-/// with `q = max(beta * eta_scale) < 1` play Russian roulette: `uniform` is called once with
-/// those lanes and returns their uniforms (a lane whose uniform is `>= q` ends; the others go on
-/// with `beta / q`). Returns the throughput and the lanes that go on.
+/// The throughput arithmetic of a path that scatters, over lanes (one path's on [`F32x1`],
+/// eight in [`Integrator::shade_lanes`]): `beta * weight`; of the lanes of `goes`, those whose
+/// product is zero end, and those of `plays` (their depth reached [`ROULETTE_START`]) with
+/// `q = max(beta * eta_scale) < 1` play Russian roulette ([`Roulette::draws`]: draw their
+/// uniforms, then [`Roulette::end`]).
 #[inline(always)]
-pub(super) fn throughput_and_roulette<V: Lanes>(
-    beta: Vec3x<V>,
-    weight: Vec3x<V>,
-    eta_scale: V,
-    goes: V,
-    plays: V,
-    uniform: impl FnOnce(V) -> V,
-) -> (Vec3x<V>, V) {
+pub(super) fn throughput<V: Lanes>(beta: Vec3x<V>, weight: Vec3x<V>, eta_scale: V, goes: V, plays: V) -> Roulette<V> {
     let zero = V::splat(0.0);
     // glam's `max_element`: `max(x, max(y, z))` with `a > b ? a : b`, which is `vmax`.
     let max_element = |v: &Vec3x<V>| v.x.vmax(v.y.vmax(v.z));
     let beta = Vec3x { x: beta.x * weight.x, y: beta.y * weight.y, z: beta.z * weight.z };
     let goes = goes & !max_element(&beta).le(zero);
     let q = max_element(&(beta * eta_scale));
-    let draws = goes & plays & q.lt(V::splat(1.0));
-    if draws.bitmask() == 0 {
-        return (beta, goes);
+    Roulette { beta, goes, q, draws: goes & plays & q.lt(V::splat(1.0)) }
+}
+
+/// Paths after [`throughput`], before their roulette.
+pub(super) struct Roulette<V: Lanes> {
+    beta: Vec3x<V>,
+    goes: V,
+    q: V,
+    /// The lanes that play Russian roulette: they draw a uniform.
+    pub(super) draws: V,
+}
+
+impl<V: Lanes> Roulette<V> {
+    /// The throughput and the lanes that go on, given the uniforms `u` of the lanes of
+    /// `draws` (others ignored): a lane whose uniform is `>= q` ends, the others go on with
+    /// `beta / q`.
+    #[inline(always)]
+    pub(super) fn end(self, u: V) -> (Vec3x<V>, V) {
+        let Roulette { beta, goes, q, draws } = self;
+        if draws.bitmask() == 0 {
+            return (beta, goes);
+        }
+        (Vec3x::select(draws, beta / q, beta), goes & !(draws & u.ge(q)))
     }
-    let ends = draws & uniform(draws).ge(q);
-    (Vec3x::select(draws, beta / q, beta), goes & !ends)
 }
 
 /// The direct-lighting group of uniform hemisphere samples (`-H`); light sampling's groups
@@ -387,15 +397,9 @@ impl<'a> Integrator<'a> {
         path.eta_scale *= eta_scale;
         let plays = self.settings.russian_roulette && path.depth + 1 >= ROULETTE_START;
         let lane = |b: bool| F32x1::from_bitmask(b as u32);
-        let rng = &mut path.rng;
-        let (beta, goes) = throughput_and_roulette(
-            path.beta.into(),
-            weight.into(),
-            F32x1::splat(path.eta_scale),
-            lane(true),
-            lane(plays),
-            |draws| F32x1::splat(if draws.bitmask() != 0 { rng.next_f32() } else { 0.0 }),
-        );
+        let r = throughput(path.beta.into(), weight.into(), F32x1::splat(path.eta_scale), lane(true), lane(plays));
+        let u = if r.draws.bitmask() != 0 { path.rng.next_f32() } else { 0.0 };
+        let (beta, goes) = r.end(F32x1::splat(u));
         path.beta = beta.into();
         if goes.bitmask() == 0 {
             return false;

@@ -14,7 +14,7 @@
 //! continuation ray. The lanes compute the shading frame, the light samples and their shadow
 //! rays, the cosine-weighted bounce direction and the continuation's origin.
 
-use super::{Frame, Integrator, PathState, ROULETTE_START, throughput_and_roulette};
+use super::{Frame, Integrator, PathState, ROULETTE_START, throughput};
 use crate::math::Vec3;
 use crate::math::orthonormal_basis_lanes;
 use crate::ray::{Hit, Ray};
@@ -322,24 +322,24 @@ impl IsaOp for Step<'_> {
 }
 
 /// `Integrator::continue_path` of the lanes of `rows.scatter` (weight `albedo`, radiance
-/// scaling 1, not delta; [`throughput_and_roulette`]), the roulette's uniforms drawn by
-/// `sobol`: `rows.beta` becomes the throughput after it and `rows.scatter` keeps the lanes that
-/// go on.
+/// scaling 1, not delta; [`throughput`]), the roulette's uniforms drawn by `sobol`:
+/// `rows.beta` becomes the throughput after it and `rows.scatter` keeps the lanes that go on.
 #[inline(always)]
 fn finish_step<V: Lanes>(rows: &mut StepRows, sobol: &mut SobolLanes) {
-    let (beta, goes) = throughput_and_roulette(
+    let r = throughput(
         Vec3x::<V>::load_rows(&rows.beta),
         Vec3x::load_rows(&rows.albedo),
         // `eta_scale * 1.0` is `eta_scale`.
         V::load(&rows.eta_scale),
         V::from_bitmask(rows.scatter),
         V::from_bitmask(rows.roulette),
-        |draws| {
-            let mut u = [0.0f32; STEP];
-            sobol.next_1d(draws.bitmask(), &mut u);
-            V::load(&u)
-        },
     );
+    let mut u = [0.0f32; STEP];
+    let draws = r.draws.bitmask();
+    if draws != 0 {
+        sobol.next_1d(draws, &mut u);
+    }
+    let (beta, goes) = r.end(V::load(&u));
     beta.store_rows(&mut rows.beta);
     rows.scatter = goes.bitmask();
 }
