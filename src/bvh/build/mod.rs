@@ -114,8 +114,8 @@ pub struct BuildOptions {
     /// kernels only traverse the 8-wide BVH, and the binary one costs more than half as much
     /// memory again (PERFORMANCE.md, "Builder").
     pub keep_bvh2: bool,
-    /// How the 8-wide BVH stores its triangle blocks: [`TreeLayout::Default`] (the vectors of
-    /// each triangle) or [`TreeLayout::Compact`] (primitive ids, the blocks built from the
+    /// How the 8-wide BVH stores its triangle blocks: [`crate::bvh::TreeLayout::Default`] (the vectors of
+    /// each triangle) or [`crate::bvh::TreeLayout::Compact`] (primitive ids, the blocks built from the
     /// scene store as the kernels reach them: the smallest tree, the same hits).
     pub layout: crate::bvh::TreeLayout,
 }
