@@ -14,6 +14,10 @@ raypack's figure is the one it prints (its own render clock); Mitsuba's is W*H*s
 too). Mitsuba's threads are Dr.Jit's pool: `drjit.set_thread_count(T)`, which counts the calling
 thread (T - 1 workers; 1 runs everything on the calling thread).
 
+`--isa avx2` runs both on AVX2 on an AVX-512 machine: raypack's kernels through `render --isa`,
+Mitsuba's through Dr.Jit's LLVM target (`jit_llvm_set_target`: the host's CPU name, AVX2's
+features without AVX-512's, 8 lanes), set before its first kernel is compiled.
+
 The dragon scene (the Stanford dragon on a floor under one area light) is generated at run time
 into the work directory from $RAYPACK_SCENES/models/stanford-dragon-871k.ply and CBbunny.dae.
 
@@ -108,6 +112,7 @@ def render_raypack(a, scene, threads, seed, out):
     cmd = [a.raypack, "render", scene, "-s", a.spp, "-m", a.depth, "-t", threads, "-r", *a.size]
     cmd += ["-f", out, "--seed", seed, "--bvh-cache", a.work / "bvh-cache"]
     cmd += ["--sampler", a.sampler] if a.sampler else []
+    cmd += ["--isa", a.isa] if a.isa else []
     p = run([str(c) for c in cmd])
     m = SAMPLES.search(p.stderr)
     if not m:
@@ -123,6 +128,28 @@ def read_exr(mi, dr, path):
     img = np.array(mi.Bitmap(str(path)), dtype=np.float64)[..., :3]
     dr.set_thread_count(threads)
     return img
+
+
+# Dr.Jit's LLVM target for `--isa avx2`: what an AVX2 CPU of the Zen 3 or Haswell kind has.
+AVX2_FEATURES = b"+sse4.2,+popcnt,+avx,+avx2,+fma,+f16c,+bmi,+bmi2,+lzcnt,+movbe,-avx512f"
+
+
+def set_mitsuba_isa(dr, isa):
+    """Makes Dr.Jit's LLVM backend compile for `isa` ('avx2': AVX2 features, 8 lanes) and
+    returns (target CPU, vector width) as it then reports them. The setter is Dr.Jit's C++
+    function `jit_llvm_set_target(cpu, features, width)` in libdrjit-core (no Python binding)."""
+    import ctypes
+
+    lib = ctypes.CDLL(str(Path(dr.__file__).parent / "libdrjit-core.so"))
+    cpu = lib._Z19jit_llvm_target_cpuv
+    cpu.restype = ctypes.c_char_p
+    width = lib._Z21jit_llvm_vector_widthv
+    width.restype = ctypes.c_uint32
+    if isa == "avx2":
+        set_target = lib._Z19jit_llvm_set_targetPKcS0_j
+        set_target.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_uint32]
+        set_target(cpu(), AVX2_FEATURES, 8)
+    return cpu().decode(), int(width())
 
 
 def stats(values):
@@ -170,7 +197,8 @@ def compare(a, mi, dr, name, scene_file):
         rmse = lambda imgs: float(np.sqrt(np.mean((imgs[0] - imgs[1]) ** 2)))
         results.append({
             "scene": name, "threads": threads, "width": w, "height": h, "spp": a.spp, "max_depth": a.depth,
-            "raypack_sampler": a.sampler or "default",
+            "raypack_sampler": a.sampler or "default", "isa": a.isa or "native",
+            "mitsuba_target": a.mitsuba_target,
             "raypack_mean_rgb": rp_mean.tolist(), "mitsuba_mean_rgb": mi_mean.tolist(),
             "mean_difference_percent": diff.tolist(), "means_agree": bool(np.abs(diff).max() <= MEANS_TOLERANCE),
             "raypack_rmse_seeds": rmse(rp_img), "mitsuba_rmse_seeds": rmse(mi_img),
@@ -194,7 +222,8 @@ def table(r):
     ]
     head = (f"### {r['scene']}, {r['threads']} thread{'s' if r['threads'] > 1 else ''} "
             f"({r['width']}x{r['height']}, {r['spp']} spp, -m {r['max_depth']}, "
-            f"{len(r['raypack_samples_per_s']['all'])} rounds)\n\n| | raypack | Mitsuba 3 llvm_ad_rgb |\n|---|---|---|\n")
+            f"{len(r['raypack_samples_per_s']['all'])} rounds, ISA {r['isa']}; Mitsuba's target {r['mitsuba_target']})"
+            "\n\n| | raypack | Mitsuba 3 llvm_ad_rgb |\n|---|---|---|\n")
     return head + "\n".join(f"| {a} | {b} | {c} |" for a, b, c in rows) + "\n"
 
 
@@ -209,6 +238,8 @@ def main():
     p.add_argument("-m", "--depth", type=int, default=5, help="raypack's -m (Mitsuba's max_depth is one more)")
     p.add_argument("--sampler", choices=["sobol", "independent"],
                    help="raypack's --sampler (default: raypack's own, Sobol'); Mitsuba's is always independent")
+    p.add_argument("--isa", choices=["avx2"],
+                   help="run both renderers on AVX2 (on an AVX-512 machine); default: each on the CPU's best")
     p.add_argument("--raypack", default=str(ROOT / "target/release/raypack"))
     p.add_argument("--translator", default=str(ROOT / "target/release/mitsuba_scene"))
     p.add_argument("--work", type=Path, help="keep the scenes and images here (default: a temporary directory)")
@@ -226,6 +257,9 @@ def main():
     import mitsuba as mi
 
     mi.set_variant("llvm_ad_rgb")
+    cpu, width = set_mitsuba_isa(dr, a.isa)
+    a.mitsuba_target = f"{cpu}, {width} lanes"
+    print(f"vs-mitsuba: Mitsuba's LLVM target {a.mitsuba_target}; raypack --isa {a.isa or 'native'}", file=sys.stderr)
     tmp = None if a.work else tempfile.TemporaryDirectory(prefix="vs-mitsuba-")
     a.work = a.work or Path(tmp.name)
     a.work.mkdir(parents=True, exist_ok=True)
