@@ -140,13 +140,18 @@ def set_mitsuba_isa(dr, isa):
     function `jit_llvm_set_target(cpu, features, width)` in libdrjit-core (no Python binding)."""
     import ctypes
 
-    lib = ctypes.CDLL(str(Path(dr.__file__).parent / "libdrjit-core.so"))
-    cpu = lib._Z19jit_llvm_target_cpuv
+    try:
+        lib = ctypes.CDLL(str(Path(dr.__file__).parent / "libdrjit-core.so"))
+        cpu = lib._Z19jit_llvm_target_cpuv
+        width = lib._Z21jit_llvm_vector_widthv
+        set_target = lib._Z19jit_llvm_set_targetPKcS0_j
+    except (OSError, AttributeError) as e:
+        if isa:
+            sys.exit(f"vs-mitsuba: --isa {isa}: this Dr.Jit ({dr.__version__}) has no jit_llvm_set_target to call: {e}")
+        return "unknown", 0
     cpu.restype = ctypes.c_char_p
-    width = lib._Z21jit_llvm_vector_widthv
     width.restype = ctypes.c_uint32
     if isa == "avx2":
-        set_target = lib._Z19jit_llvm_set_targetPKcS0_j
         set_target.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_uint32]
         set_target(cpu(), AVX2_FEATURES, 8)
     return cpu().decode(), int(width())
