@@ -97,14 +97,56 @@ pub struct DirectPoint {
     pub start: u32,
 }
 
+/// Paths shaded together in SIMD lanes (the lanes of [`LanePoints`] and [`LaneSample`]).
+pub const STEP: usize = 8;
+
+/// `N` rows of one value per lane.
+pub type Rows<const N: usize> = [[f32; STEP]; N];
+
+/// Up to [`STEP`] shading points shaded together in lanes, whose direct lighting is added
+/// together, in lanes, once their shadow rays are traced. Each lane is one path's point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LanePoints {
+    /// Lane `j`'s path (for the bits `j` of `mask`).
+    pub path: [u32; STEP],
+    /// The lanes that are shading points.
+    pub mask: u32,
+    /// Each lane's throughput at its point (before its BSDF sample).
+    pub weight: Rows<3>,
+    /// Their first row in [`DirectQueue::lane_samples`]: one row per light sample of a point,
+    /// in the order the integrator draws them; the next entry's `start` ends them.
+    pub start: u32,
+}
+
+/// One light sample of each lane of a [`LanePoints`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LaneSample {
+    /// `f · radiance · scale` of each lane's sample ([`DirectSample`]'s product).
+    pub value: Rows<3>,
+    /// The lanes whose sample is queued (it carries light).
+    pub kept: u32,
+    /// The kept lanes not found blocked (a shadow ray clears its lane's bit).
+    pub visible: u32,
+}
+
+/// Marks a shadow ray's owner as a lane sample: `LANE_OWNER | (row · STEP + lane)`, `row` in
+/// [`DirectQueue::lane_samples`].
+pub const LANE_OWNER: u32 = 1 << 31;
+
 /// The direct lighting of one bounce of a batch of paths: the shading points, their samples in
-/// the order they were drawn, and the rays that answer them.
+/// the order they were drawn, and the rays that answer them. Points shaded one path at a time
+/// list their samples one by one (`points`, `samples`); points shaded in lanes whose every
+/// light is sampled in the lanes keep them in rows (`lanes`, `lane_samples`).
 #[derive(Clone, Debug, Default)]
 pub struct DirectQueue {
     /// Shading points, in the order they were shaded.
     pub points: Vec<DirectPoint>,
     /// Samples of all points, grouped by point.
     pub samples: Vec<DirectSample>,
+    /// Shading points taken in lanes, a step of up to [`STEP`] points each.
+    pub lanes: Vec<LanePoints>,
+    /// Their samples, grouped by step.
+    pub lane_samples: Vec<LaneSample>,
     /// Shadow rays (any hit), each owned by its sample.
     pub shadow: RayQueue,
     /// Hemisphere rays (closest hit), each owned by its sample.
@@ -116,6 +158,8 @@ impl DirectQueue {
     pub fn clear(&mut self) {
         self.points.clear();
         self.samples.clear();
+        self.lanes.clear();
+        self.lane_samples.clear();
         self.shadow.clear();
         self.probes.clear();
     }
@@ -140,6 +184,35 @@ impl DirectQueue {
     pub fn push_probe(&mut self, sample: DirectSample, ray: Ray) {
         self.probes.push(ray, self.samples.len() as u32);
         self.samples.push(sample);
+    }
+
+    /// Direct samples queued, counting every lane of the lane rows.
+    #[inline]
+    pub fn sample_count(&self) -> usize {
+        self.samples.len() + self.lane_samples.len() * STEP
+    }
+
+    /// Marks not visible the samples whose shadow ray `shadow.occluded` finds blocked.
+    pub fn mark_blocked(&mut self) {
+        for (&blocked, &owner) in self.shadow.occluded.iter().zip(&self.shadow.owner) {
+            if !blocked {
+                continue;
+            }
+            if owner & LANE_OWNER != 0 {
+                let i = (owner & !LANE_OWNER) as usize;
+                self.lane_samples[i / STEP].visible &= !(1 << (i % STEP));
+            } else {
+                self.samples[owner as usize].visible = false;
+            }
+        }
+    }
+
+    /// The sample rows of lane step `i`.
+    #[inline]
+    pub fn lane_samples_of(&self, i: usize) -> &[LaneSample] {
+        let start = self.lanes[i].start as usize;
+        let end = self.lanes.get(i + 1).map_or(self.lane_samples.len(), |p| p.start as usize);
+        &self.lane_samples[start..end]
     }
 
     /// The samples of point `i`.

@@ -95,6 +95,9 @@ impl Wavefront {
         room(&mut self.surfaces, wave);
         room(&mut self.direct.points, wave);
         room(&mut self.direct.samples, samples);
+        // A step of lane points at most per STEP paths, a row per direct sample of each.
+        room(&mut self.direct.lanes, wave.div_ceil(STEP));
+        room(&mut self.direct.lane_samples, samples.div_ceil(STEP) + integrator.direct_samples_per_point() as usize);
         let q = &mut self.queue;
         room(&mut q.rays, wave);
         room(&mut q.owner, wave);
@@ -272,7 +275,7 @@ impl Wavefront {
                 if lanes != 0 {
                     integrator.shade_lanes(&mut e, k0, lanes, d, &mut self.lane_scratch);
                 }
-                if d.samples.len() >= DIRECT_FLUSH {
+                if d.sample_count() >= DIRECT_FLUSH {
                     // Many light samples per point (`-l`): trace what is queued now, so that
                     // the queue stays bounded.
                     clock.lap(&mut times.shade);
@@ -332,9 +335,7 @@ impl DirectContext<'_, '_> {
             resize(&mut s.occluded, s.rays.len(), false);
             tracer.occluded_stream(&s.rays, &mut s.occluded);
             clock.lap(&mut times.trace[RayKind::Shadow as usize]);
-            for (&blocked, &i) in s.occluded.iter().zip(&s.owner) {
-                d.samples[i as usize].visible = !blocked;
-            }
+            d.mark_blocked();
         }
         let p = &mut d.probes;
         if !p.is_empty() {
@@ -353,6 +354,7 @@ impl DirectContext<'_, '_> {
             let path = &mut paths[point.path as usize];
             path.l += point.weight * integrator.direct_total(d.samples_of(i));
         }
+        integrator.add_direct_lanes(d, paths);
         clock.lap(&mut times.shade);
     }
 }

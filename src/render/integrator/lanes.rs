@@ -19,7 +19,7 @@ use crate::math::Vec3;
 use crate::math::orthonormal_basis_lanes;
 use crate::ray::{Hit, Ray};
 use crate::render::light::SampledLight;
-use crate::render::queue::{DirectQueue, DirectSample};
+use crate::render::queue::{DirectQueue, DirectSample, LANE_OWNER, LanePoints, LaneSample, Rows};
 use crate::render::sampler::SobolLanes;
 use crate::render::sampling::concentric_disk_lanes;
 use crate::render::spawn::{offset_origin_lanes, spawn_ray_to_lanes, toward_lanes};
@@ -29,10 +29,7 @@ use crate::simd::{IsaLanes, Lanes, Vec3x};
 use std::f32::consts::FRAC_1_PI;
 
 /// Paths per step.
-pub const STEP: usize = 8;
-
-/// `N` rows of one value per lane.
-type Rows<const N: usize> = [[f32; STEP]; N];
+pub use crate::render::queue::STEP;
 
 /// The direct-lighting samples of one shading point, in the order light sampling draws them:
 /// each light (its index is the sample's group) as many times as it is sampled. The kinds
@@ -42,6 +39,8 @@ type Rows<const N: usize> = [[f32; STEP]; N];
 pub struct LaneLights {
     /// Each sample's light (its group), and whether the lanes sample it.
     samples: Vec<(u32, bool)>,
+    /// Each sample's group's samples per point ([`Integrator::direct_total`]'s divisor).
+    divisors: Vec<f32>,
     /// True when every sample is taken in the lanes.
     all_lanes: bool,
 }
@@ -49,13 +48,14 @@ pub struct LaneLights {
 impl LaneLights {
     /// The samples of `lights` with `per_area` samples of each area light.
     pub(super) fn new(lights: &[SampledLight], per_area: u32) -> Self {
-        let mut samples = Vec::new();
+        let (mut samples, mut divisors) = (Vec::new(), Vec::new());
         for (group, light) in lights.iter().enumerate() {
             let n = if light.is_delta() { 1 } else { per_area.max(1) };
             samples.extend(std::iter::repeat_n((group as u32, light.in_lanes()), n as usize));
+            divisors.extend(std::iter::repeat_n(n as f32, n as usize));
         }
         let all_lanes = lights.iter().all(SampledLight::in_lanes);
-        Self { samples, all_lanes }
+        Self { samples, divisors, all_lanes }
     }
 
     /// Samples per shading point.
@@ -87,6 +87,8 @@ pub struct SampleLanes {
     scale: [f32; STEP],
     /// Radiance arriving from the sample (point lights: `I / r²`).
     radiance: Rows<3>,
+    /// What the sample adds if visible: `f · radiance · scale` ([`Integrator::direct_total`]).
+    value: Rows<3>,
 }
 
 /// The rows of one step: what is read from the paths, and the continuation computed.
@@ -217,6 +219,8 @@ impl Integrator<'_> {
         }
         // With every path's numbers in the lanes, the lanes end the step too.
         let finish = sobol_lanes == mask;
+        // The throughput at the points, before the lanes' Russian roulette changes it.
+        let weight = rows.beta;
         let step = Step {
             rows: &mut rows,
             lights: &self.lights.lights,
@@ -227,6 +231,18 @@ impl Integrator<'_> {
             finish,
         };
         dispatch(self.scene.isa(), step);
+        // With every light sampled in the lanes, the points' samples stay in rows.
+        let in_rows = lights.all_lanes && rows.direct != 0;
+        let first_row = direct.lane_samples.len();
+        if in_rows {
+            let mut path = [0; STEP];
+            for j in crate::simd::bits(rows.direct) {
+                path[j] = e.owner[k0 + j];
+            }
+            direct.lanes.push(LanePoints { path, mask: rows.direct, weight, start: first_row as u32 });
+            let rows = scratch.iter().map(|s| LaneSample { value: s.value, kept: s.keep, visible: s.keep });
+            direct.lane_samples.extend(rows);
+        }
         let lane3 = |r: &Rows<3>, j: usize| Vec3::new(r[0][j], r[1][j], r[2][j]);
         for j in crate::simd::bits(mask) {
             let k = k0 + j;
@@ -236,7 +252,12 @@ impl Integrator<'_> {
                 sobol.store(j, &mut path.rng);
             }
             let albedo = albedos[j];
-            if rows.direct >> j & 1 != 0 {
+            if in_rows && rows.direct >> j & 1 != 0 {
+                for (i, sample) in scratch.iter().enumerate().filter(|(_, s)| s.shadow >> j & 1 != 0) {
+                    let ray = Ray::segment(lane3(&sample.origin, j), lane3(&sample.dir, j), 0.0, sample.tfar[j]);
+                    direct.shadow.push(ray, LANE_OWNER | ((first_row + i) * STEP + j) as u32);
+                }
+            } else if rows.direct >> j & 1 != 0 {
                 direct.begin(id, path.beta);
                 // The frame of the lights sampled one path at a time.
                 let at = (!lights.all_lanes).then(|| {
@@ -282,6 +303,69 @@ impl Integrator<'_> {
             e.alive[k] = alive;
         }
     }
+}
+
+impl Integrator<'_> {
+    /// Adds the direct lighting of the lane points of `d` (their shadow rays traced) to their
+    /// paths: per lane, [`Integrator::direct_total`] of its samples times its weight, the same
+    /// sums bit for bit.
+    pub fn add_direct_lanes(&self, d: &DirectQueue, paths: &mut [PathState]) {
+        let Some(lights) = &self.lane_lights else { return };
+        if d.lanes.is_empty() {
+            return;
+        }
+        dispatch(self.scene.isa(), DirectLanes { d, paths, groups: &lights.samples, divisors: &lights.divisors });
+    }
+}
+
+/// Direct lighting added in lanes, run on one ISA.
+struct DirectLanes<'a> {
+    d: &'a DirectQueue,
+    paths: &'a mut [PathState],
+    /// Each sample row's light (its group) and that group's samples per point.
+    groups: &'a [(u32, bool)],
+    divisors: &'a [f32],
+}
+
+impl IsaOp for DirectLanes<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn run<I: IsaLanes>(self) {
+        for (i, points) in self.d.lanes.iter().enumerate() {
+            let add = direct_lanes::<I::F8>(points, self.d.lane_samples_of(i), self.groups, self.divisors);
+            for j in crate::simd::bits(points.mask) {
+                self.paths[points.path[j] as usize].l += add.lane(j);
+            }
+        }
+    }
+}
+
+/// `weight · direct_total(samples)` of each lane of `points`: each group's visible values
+/// summed in draw order and divided by its divisor, where the lane queued any sample of it.
+#[inline(always)]
+fn direct_lanes<V: Lanes>(
+    points: &LanePoints,
+    rows: &[LaneSample],
+    groups: &[(u32, bool)],
+    divisors: &[f32],
+) -> Vec3x<V> {
+    let zero = Vec3x::<V>::splat(Vec3::ZERO);
+    let mut total = zero;
+    let mut i = 0;
+    while i < rows.len() {
+        let group = groups[i].0;
+        let (mut sum, mut queued) = (zero, 0);
+        let divisor = V::splat(divisors[i]);
+        while i < rows.len() && groups[i].0 == group {
+            let r = &rows[i];
+            sum = Vec3x::select(V::from_bitmask(r.visible), sum + Vec3x::load_rows(&r.value), sum);
+            queued |= r.kept;
+            i += 1;
+        }
+        total = Vec3x::select(V::from_bitmask(queued), total + sum / divisor, total);
+    }
+    let w = Vec3x::<V>::load_rows(&points.weight);
+    Vec3x { x: w.x * total.x, y: w.y * total.y, z: w.z * total.z }
 }
 
 /// The lanes' part of a step, run on one ISA.
@@ -355,6 +439,8 @@ fn step<V: Lanes>(rows: &mut StepRows, lights: &[SampledLight], groups: &[(u32, 
     let (zero, one) = (V::splat(0.0), V::splat(1.0));
     if rows.direct != 0 {
         let gathers = V::from_bitmask(rows.direct) & V::from_bitmask(rows.reflects);
+        // `bsdf::f` of a diffuse BSDF.
+        let f = Vec3x::<V>::load_rows(&rows.albedo) * V::splat(FRAC_1_PI);
         for (&(group, _), s) in groups.iter().zip(samples.iter_mut()) {
             let (u0, u1) = (V::load(&s.u[0]), V::load(&s.u[1]));
             let Some(ls) = lights[group as usize].sample_lanes(p, u0, u1) else { continue };
@@ -362,8 +448,12 @@ fn step<V: Lanes>(rows: &mut StepRows, lights: &[SampledLight], groups: &[(u32, 
             let wi_z = ls.wi.dot(ns);
             let keep = ls.carries & gathers & (wo_z * wi_z).gt(zero) & ls.pdf.gt(zero);
             s.keep = keep.bitmask();
-            (wi_z.abs() / ls.pdf).store(&mut s.scale);
+            let scale = wi_z.abs() / ls.pdf;
+            scale.store(&mut s.scale);
             ls.radiance.store_rows(&mut s.radiance);
+            // `DirectSample`'s `f · radiance · scale`, in its order.
+            let r = ls.radiance;
+            (Vec3x { x: f.x * r.x, y: f.y * r.y, z: f.z * r.z } * scale).store_rows(&mut s.value);
             let shadow = spawn_ray_to_lanes(p, ng, ls.point);
             s.shadow = (keep & shadow.ok).bitmask();
             shadow.origin.store_rows(&mut s.origin);
@@ -503,11 +593,18 @@ mod tests {
     /// Whole batches through the wavefront with the lanes and without (every hit one path at
     /// a time): the same radiance bit for bit, in the built-in Cornell box (diffuse walls
     /// beside a mirror and a glass sphere, so steps mix lanes and single paths) lit by its
-    /// area light, a point light and an emissive triangle (sampled one path at a time), with
-    /// several light samples, every integrator view, Russian roulette on and off, and both
-    /// samplers (the Sobol' lanes draw their numbers together).
+    /// area light and a point light, with and without an emissive triangle (sampled one path
+    /// at a time; without it every light is sampled in the lanes and the points' direct
+    /// lighting is added in rows), with several light samples, every integrator view, Russian
+    /// roulette on and off, and both samplers (the Sobol' lanes draw their numbers together).
     #[test]
     fn wavefront_radiance_is_the_same_without_lanes() {
+        for glow in [true, false] {
+            radiance_is_the_same_without_lanes(glow);
+        }
+    }
+
+    fn radiance_is_the_same_without_lanes(glow: bool) {
         use crate::render::sampler::{SamplerKind, SamplerSource};
         use crate::render::stats::RayLog;
         use crate::render::wavefront::{PhaseTimes, StreamOrder, Wavefront};
@@ -515,9 +612,11 @@ mod tests {
         let mut builder = crate::testing::cornell_box();
         let centre = builder.bounds().center();
         builder.add_light(crate::scene::Light::Point { position: centre + Vec3::Y * 0.3, intensity: Vec3::splat(0.4) });
-        let glow = builder.add_material(crate::Material::emissive(Vec3::splat(2.0)));
-        let tri = [Vec3::new(-0.3, -0.2, -0.98), Vec3::new(0.3, -0.2, -0.98), Vec3::new(0.0, 0.3, -0.98)];
-        builder.add_mesh(&tri, &[[0, 1, 2]], glow).unwrap();
+        if glow {
+            let glow = builder.add_material(crate::Material::emissive(Vec3::splat(2.0)));
+            let tri = [Vec3::new(-0.3, -0.2, -0.98), Vec3::new(0.3, -0.2, -0.98), Vec3::new(0.0, 0.3, -0.98)];
+            builder.add_mesh(&tri, &[[0, 1, 2]], glow).unwrap();
+        }
         let (scene, _) = builder.commit(&crate::BuildOptions::default());
         let kinds =
             [IntegratorKind::Global, IntegratorKind::Direct, IntegratorKind::IndirectOnly, IntegratorKind::Bounce];
@@ -534,7 +633,7 @@ mod tests {
                 let kinds =
                     integrator.lane_lights.as_ref().map(|l| l.samples.iter().map(|&(_, in_lanes)| in_lanes).collect());
                 // The area light and the point light in the lanes, the emissive triangle not.
-                assert_eq!(kinds.map(|k: Vec<bool>| (k.contains(&true), k.contains(&false))), Some((true, true)));
+                assert_eq!(kinds.map(|k: Vec<bool>| (k.contains(&true), k.contains(&false))), Some((true, glow)));
                 if !lanes {
                     integrator.lane_lights = None;
                 }
@@ -556,7 +655,7 @@ mod tests {
             for sampler in SamplerKind::ALL {
                 let (with, without) = (radiance(true, sampler), radiance(false, sampler));
                 assert!(with.iter().filter(|l| **l != [0; 3]).count() > 300, "{kind:?}: many paths bring light");
-                assert_eq!(with, without, "{kind:?}, {sampler} sampler");
+                assert_eq!(with, without, "{kind:?}, {sampler} sampler, glow {glow}");
             }
         }
     }
