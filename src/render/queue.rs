@@ -97,8 +97,9 @@ pub struct DirectPoint {
     pub start: u32,
 }
 
-/// Paths shaded together in SIMD lanes (the lanes of [`LanePoints`] and [`LaneSample`]).
-pub const STEP: usize = 8;
+/// Paths shaded together in SIMD lanes (the lanes of [`LanePoints`] and [`LaneSample`]): a
+/// step of the scene's surface rows ([`crate::scene::surface::SurfaceRows`]).
+pub const STEP: usize = crate::scene::surface::STEP;
 
 /// `N` rows of one value per lane.
 pub type Rows<const N: usize> = [[f32; STEP]; N];

@@ -29,7 +29,7 @@ use super::sampler::Sampler;
 use super::stats::{RayKind, RayLog};
 use crate::math::Vec3;
 use crate::ray::{Hit, Ray};
-use crate::scene::SurfaceHit;
+use crate::scene::surface::SurfaceRows;
 use std::time::{Duration, Instant};
 
 /// How secondary rays are ordered before each stream. The default, shading order for both
@@ -61,8 +61,9 @@ pub struct Wavefront {
     queue: RayQueue,
     /// `alive[k]`: the path of `queue.rays[k]` goes on (its continuation replaced the ray).
     alive: Vec<bool>,
-    /// `surfaces[k]`: the surface hit by `queue.rays[k]`, if any.
-    surfaces: Vec<SurfaceHit>,
+    /// The surfaces hit by `queue.rays`, in rows of [`STEP`]: ray `k`'s is lane `k % STEP` of
+    /// `surfaces[k / STEP]`.
+    surfaces: Vec<SurfaceRows>,
     /// Direct lighting of the current bounce.
     direct: DirectQueue,
     scratch: SortScratch,
@@ -92,7 +93,7 @@ impl Wavefront {
         room(&mut c.owner, paths);
         room(&mut c.hits, paths);
         room(&mut self.alive, wave);
-        room(&mut self.surfaces, wave);
+        room(&mut self.surfaces, wave.div_ceil(STEP));
         room(&mut self.direct.points, wave);
         room(&mut self.direct.samples, samples);
         // A step of lane points at most per STEP paths, a row per direct sample of each.
@@ -243,9 +244,9 @@ impl Wavefront {
             let (q, d) = (&mut self.queue, &mut self.direct);
             d.clear();
             let scene = tracer.scene();
-            resize(&mut self.surfaces, q.rays.len(), MISSED);
+            resize(&mut self.surfaces, q.rays.len().div_ceil(STEP), SurfaceRows::default());
             scene.prefetch_hits(&q.hits);
-            scene.surfaces(&q.rays, &q.hits, &mut self.surfaces);
+            scene.surface_rows(&q.rays, &q.hits, &mut self.surfaces);
             let n = q.rays.len();
             resize(&mut self.alive, n, false);
             for k0 in (0..n).step_by(STEP) {
@@ -264,7 +265,7 @@ impl Wavefront {
                         continue;
                     }
                     let id = e.owner[k];
-                    let (path, surface) = (&mut e.paths[id as usize], &e.surfaces[k]);
+                    let (path, surface) = (&mut e.paths[id as usize], &e.surfaces[k / STEP].get(k % STEP));
                     let at = integrator.shade(path, &e.rays[k], &e.hits[k], surface, d, id);
                     let next = at.and_then(|at| integrator.scatter(path, surface, &at));
                     if let Some(next) = next {
@@ -427,8 +428,11 @@ pub fn worker_bytes(paths: usize, direct: usize) -> u64 {
     let ray = size_of::<Ray>() + size_of::<u32>();
     let per_path =
         size_of::<Sampler>() + size_of::<Vec3>() + size_of::<PathState>() + size_of::<u32>() + ray + size_of::<Hit>();
-    let per_wave =
-        ray + size_of::<Hit>() + size_of::<bool>() + size_of::<SurfaceHit>() + size_of::<super::queue::DirectPoint>();
+    let per_wave = ray
+        + size_of::<Hit>()
+        + size_of::<bool>()
+        + size_of::<SurfaceRows>() / STEP
+        + size_of::<super::queue::DirectPoint>();
     let per_sample = size_of::<super::queue::DirectSample>() + ray + size_of::<bool>();
     let sort = SortScratch::bytes_per_ray() * samples.max(wave);
     (paths * per_path + wave * per_wave + samples * per_sample + sort) as u64
@@ -440,10 +444,6 @@ const WAVE_PATHS: usize = 1024;
 
 /// Direct-lighting samples queued before the bounce's shading is interrupted to trace them.
 const DIRECT_FLUSH: usize = 1 << 16;
-
-/// What stands in `surfaces` for a ray that hit nothing.
-const MISSED: SurfaceHit =
-    SurfaceHit { position: Vec3::ZERO, geometric_normal: Vec3::Z, shading_normal: Vec3::Z, material: 0 };
 
 /// Splits elapsed time into phases.
 struct Clock(Instant);

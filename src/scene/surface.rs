@@ -1,6 +1,7 @@
-//! The local geometry of many hits at once ([`Scene::surfaces`]): eight triangle hits per step
-//! in SIMD lanes, with the operations of [`Scene::surface`] in the same order, so every hit's
-//! [`SurfaceHit`] is bit-identical to the one-at-a-time result.
+//! The local geometry of many hits at once ([`Scene::surfaces`], or as rows of eight hits:
+//! [`Scene::surface_rows`]): eight triangle hits per step in SIMD lanes, with the operations of
+//! [`Scene::surface`] in the same order, so every hit's [`SurfaceHit`] is bit-identical to the
+//! one-at-a-time result.
 
 use crate::math::Vec3;
 use crate::ray::{Hit, Ray};
@@ -8,8 +9,66 @@ use crate::scene::store::{Scene, SurfaceHit, TrianglesSoa};
 use crate::simd::isa::{IsaOp, dispatch};
 use crate::simd::{IsaLanes, Lanes, Vec3x};
 
-/// Hits per SIMD step.
-const STEP: usize = 8;
+/// Hits per SIMD step (and per [`SurfaceRows`]).
+pub const STEP: usize = 8;
+
+/// The surfaces of a step of eight hits as rows (structure of arrays): lane `j` of each row is
+/// hit `j`'s. Lanes of misses hold [`SurfaceRows::MISS`]'s values.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceRows {
+    /// Positions (`x`, `y`, `z` rows).
+    pub position: [[f32; STEP]; 3],
+    /// Unit geometric normals.
+    pub geometric_normal: [[f32; STEP]; 3],
+    /// Unit shading normals.
+    pub shading_normal: [[f32; STEP]; 3],
+    /// Material ids.
+    pub material: [u32; STEP],
+}
+
+impl SurfaceRows {
+    /// What a miss's lane holds: the origin, normals `+z`, material 0.
+    pub const MISS: SurfaceHit =
+        SurfaceHit { position: Vec3::ZERO, geometric_normal: Vec3::Z, shading_normal: Vec3::Z, material: 0 };
+
+    /// Eight misses.
+    pub const MISSES: Self = {
+        let z = [[0.0; STEP], [0.0; STEP], [1.0; STEP]];
+        Self { position: [[0.0; STEP]; 3], geometric_normal: z, shading_normal: z, material: [0; STEP] }
+    };
+
+    /// Lane `j`.
+    #[inline]
+    pub fn get(&self, j: usize) -> SurfaceHit {
+        let l = |r: &[[f32; STEP]; 3]| Vec3::new(r[0][j], r[1][j], r[2][j]);
+        SurfaceHit {
+            position: l(&self.position),
+            geometric_normal: l(&self.geometric_normal),
+            shading_normal: l(&self.shading_normal),
+            material: self.material[j],
+        }
+    }
+
+    /// Sets lane `j` to `s`.
+    #[inline]
+    pub fn set(&mut self, j: usize, s: &SurfaceHit) {
+        for (r, v) in [
+            (&mut self.position, s.position),
+            (&mut self.geometric_normal, s.geometric_normal),
+            (&mut self.shading_normal, s.shading_normal),
+        ] {
+            (r[0][j], r[1][j], r[2][j]) = (v.x, v.y, v.z);
+        }
+        self.material[j] = s.material;
+    }
+}
+
+impl Default for SurfaceRows {
+    /// Eight misses.
+    fn default() -> Self {
+        Self::MISSES
+    }
+}
 
 impl Scene {
     /// [`Scene::surface`] of every hit of `hits` (traced along `rays`) into `out`, leaving
@@ -18,53 +77,97 @@ impl Scene {
     /// are those of [`Scene::surface`] bit for bit.
     pub fn surfaces(&self, rays: &[Ray], hits: &[Hit], out: &mut [SurfaceHit]) {
         assert!(rays.len() == hits.len() && hits.len() == out.len(), "rays, hits and out differ in length");
-        dispatch(self.isa, Surfaces { scene: self, rays, hits, out })
+        let sink = HitSink { rows: SurfaceRows::MISSES, out };
+        dispatch(self.isa, Surfaces { scene: self, rays, hits, sink })
+    }
+
+    /// [`Scene::surfaces`] as rows: `out[i]` gets hits `8 i .. 8 i + 8` (misses and lanes past
+    /// the end: [`SurfaceRows::MISS`]). `rays` and `hits` must have the same length, `out`
+    /// one entry per eight of them, rounded up.
+    pub fn surface_rows(&self, rays: &[Ray], hits: &[Hit], out: &mut [SurfaceRows]) {
+        assert!(rays.len() == hits.len() && hits.len().div_ceil(STEP) == out.len(), "rays, hits and out disagree");
+        dispatch(self.isa, Surfaces { scene: self, rays, hits, sink: out })
     }
 }
 
-struct Surfaces<'a> {
-    scene: &'a Scene,
-    rays: &'a [Ray],
-    hits: &'a [Hit],
+/// Where [`Surfaces`] puts each step's rows.
+trait Sink {
+    /// The rows of step `k`, to be filled.
+    fn rows(&mut self, k: usize) -> &mut SurfaceRows;
+    /// Step `k` is filled; its hits are the bits of `hit`.
+    fn done(&mut self, k: usize, hit: u32);
+}
+
+/// Rows in place.
+impl Sink for &mut [SurfaceRows] {
+    #[inline(always)]
+    fn rows(&mut self, k: usize) -> &mut SurfaceRows {
+        &mut self[k]
+    }
+    #[inline(always)]
+    fn done(&mut self, _: usize, _: u32) {}
+}
+
+/// One hit per entry, misses left as they are.
+struct HitSink<'a> {
+    rows: SurfaceRows,
     out: &'a mut [SurfaceHit],
 }
 
-impl IsaOp for Surfaces<'_> {
+impl Sink for HitSink<'_> {
+    #[inline(always)]
+    fn rows(&mut self, _: usize) -> &mut SurfaceRows {
+        &mut self.rows
+    }
+    #[inline(always)]
+    fn done(&mut self, k: usize, hit: u32) {
+        for j in crate::simd::bits(hit) {
+            self.out[k * STEP + j] = self.rows.get(j);
+        }
+    }
+}
+
+/// The surfaces of `hits`, step by step, into `sink`.
+struct Surfaces<'a, S> {
+    scene: &'a Scene,
+    rays: &'a [Ray],
+    hits: &'a [Hit],
+    sink: S,
+}
+
+impl<S: Sink> IsaOp for Surfaces<'_, S> {
     type Output = ();
     #[inline(always)]
     fn run<I: IsaLanes>(self) {
-        let (scene, rays, hits, out) = (self.scene, self.rays, self.hits, self.out);
+        let (scene, rays, hits, mut sink) = (self.scene, self.rays, self.hits, self.sink);
         let nt = scene.triangles.len();
-        let full = hits.len() / STEP * STEP;
-        for ((r, h), o) in
-            rays[..full].chunks_exact(STEP).zip(hits[..full].chunks_exact(STEP)).zip(out.chunks_exact_mut(STEP))
-        {
-            let h: &[Hit; STEP] = h.try_into().expect("a step of hits");
+        for (k, (r, h)) in rays.chunks(STEP).zip(hits.chunks(STEP)).enumerate() {
+            // The last step padded with misses.
+            let mut step = [Hit::MISS; STEP];
+            step[..h.len()].copy_from_slice(h);
             // Misses carry `Hit::NONE` (past every triangle), spheres ids from `nt` on.
-            let triangles = h.iter().enumerate().fold(0u32, |m, (j, h)| m | (((h.prim as usize) < nt) as u32) << j);
+            let (mut triangles, mut hit) = (0u32, 0u32);
+            for (j, h) in step.iter().enumerate() {
+                triangles |= (((h.prim as usize) < nt) as u32) << j;
+                hit |= (h.is_hit() as u32) << j;
+            }
+            let rows = sink.rows(k);
+            *rows = SurfaceRows::MISSES;
             if triangles != 0 {
-                triangle_surfaces::<I::F8>(&scene.triangles, h, triangles, o.try_into().expect("a step of outputs"));
+                triangle_surfaces::<I::F8>(&scene.triangles, &step, triangles, rows);
             }
-            if triangles != (1 << STEP) - 1 {
-                for j in 0..STEP {
-                    if triangles >> j & 1 == 0 && h[j].is_hit() {
-                        o[j] = scene.surface(&r[j], &h[j]);
-                    }
-                }
+            for j in crate::simd::bits(hit & !triangles) {
+                rows.set(j, &scene.surface(&r[j], &step[j]));
             }
-        }
-        for ((r, h), o) in rays[full..].iter().zip(&hits[full..]).zip(&mut out[full..]) {
-            if h.is_hit() {
-                *o = scene.surface(r, h);
-            }
+            sink.done(k, hit);
         }
     }
 }
 
 /// The surfaces of the hits of `hits` whose bit is set in `triangles` (triangle hits), in
-/// lanes `V` (of eight); the other entries of `out` are left as they are.
+/// lanes `V` (of eight); the other lanes of `out` are left as they are.
 #[inline(always)]
-fn triangle_surfaces<V: Lanes>(tris: &TrianglesSoa, hits: &[Hit; STEP], triangles: u32, out: &mut [SurfaceHit; STEP]) {
+fn triangle_surfaces<V: Lanes>(tris: &TrianglesSoa, hits: &[Hit; STEP], triangles: u32, out: &mut SurfaceRows) {
     debug_assert_eq!(V::LANES, STEP);
     // Rows (x, y, z each): the corners a, b, c, then their normals; lanes of other hits
     // stay zero and their results are dropped.
@@ -97,18 +200,18 @@ fn triangle_surfaces<V: Lanes>(tris: &TrianglesSoa, hits: &[Hit; STEP], triangle
         let i = Vec3x::select(i.dot(ng).lt(V::splat(0.0)), -i, i);
         ns = Vec3x::select(i_ok, i, ng);
     }
-    let mut lanes = [[[0.0f32; STEP]; 3]; 3];
-    position.store_rows(&mut lanes[0]);
-    ng.store_rows(&mut lanes[1]);
-    ns.store_rows(&mut lanes[2]);
+    if triangles == (1 << STEP) - 1 {
+        position.store_rows(&mut out.position);
+        ng.store_rows(&mut out.geometric_normal);
+        ns.store_rows(&mut out.shading_normal);
+    } else {
+        let others = V::from_bitmask(!triangles);
+        Vec3x::select(others, Vec3x::load_rows(&out.position), position).store_rows(&mut out.position);
+        Vec3x::select(others, Vec3x::load_rows(&out.geometric_normal), ng).store_rows(&mut out.geometric_normal);
+        Vec3x::select(others, Vec3x::load_rows(&out.shading_normal), ns).store_rows(&mut out.shading_normal);
+    }
     for j in crate::simd::bits(triangles) {
-        let l = |k: usize| Vec3::new(lanes[k][0][j], lanes[k][1][j], lanes[k][2][j]);
-        out[j] = SurfaceHit {
-            position: l(0),
-            geometric_normal: l(1),
-            shading_normal: l(2),
-            material: tris.material[hits[j].prim as usize],
-        };
+        out.material[j] = tris.material[hits[j].prim as usize];
     }
 }
 
@@ -129,6 +232,7 @@ fn normalized<V: Lanes>(v: Vec3x<V>) -> (Vec3x<V>, V) {
 
 #[cfg(test)]
 mod tests {
+    use super::{STEP, SurfaceRows};
     use crate::math::Vec3;
     use crate::ray::{Hit, Ray};
     use crate::rng::Rng;
@@ -140,6 +244,13 @@ mod tests {
         geometric_normal: Vec3::ZERO,
         shading_normal: Vec3::ZERO,
         material: 99,
+    };
+
+    const UNTOUCHED_ROWS: SurfaceRows = SurfaceRows {
+        position: [[-7.0; STEP]; 3],
+        geometric_normal: [[0.0; STEP]; 3],
+        shading_normal: [[0.0; STEP]; 3],
+        material: [99; STEP],
     };
 
     fn bits(s: &SurfaceHit) -> [u32; 10] {
@@ -213,6 +324,13 @@ mod tests {
                             "{isa}, hit {k} of {len}: {:?}",
                             hits[k]
                         );
+                    }
+                    // The same as rows, misses and the lanes past the end as `MISS`.
+                    let mut rows = vec![UNTOUCHED_ROWS; len.div_ceil(STEP)];
+                    scene.surface_rows(&rays[..len], &hits[..len], &mut rows);
+                    for k in 0..rows.len() * STEP {
+                        let want = want[..len].get(k).copied().flatten().unwrap_or(SurfaceRows::MISS);
+                        assert_eq!(bits(&rows[k / STEP].get(k % STEP)), bits(&want), "{isa}, rows, hit {k} of {len}");
                     }
                 }
             }

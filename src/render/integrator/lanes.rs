@@ -17,15 +17,16 @@
 use super::{Frame, Integrator, PathState, ROULETTE_START, throughput};
 use crate::math::Vec3;
 use crate::math::orthonormal_basis_lanes;
-use crate::ray::{Hit, Ray};
+use crate::ray::{Hit, Ray, rays_from_lanes};
 use crate::render::light::SampledLight;
 use crate::render::queue::{DirectQueue, DirectSample, LANE_OWNER, LanePoints, LaneSample, Rows};
 use crate::render::sampler::SobolLanes;
 use crate::render::sampling::concentric_disk_lanes;
 use crate::render::spawn::{offset_origin_lanes, spawn_ray_to_lanes, toward_lanes};
-use crate::scene::{Bsdf, SurfaceHit};
+use crate::scene::Bsdf;
+use crate::scene::surface::SurfaceRows;
 use crate::simd::isa::{IsaOp, dispatch};
-use crate::simd::{IsaLanes, Lanes, Vec3x};
+use crate::simd::{IsaLanes, Lanes, Transpose8, Vec3x};
 use std::f32::consts::FRAC_1_PI;
 
 /// Paths per step.
@@ -79,16 +80,24 @@ pub struct SampleLanes {
     keep: u32,
     /// Lanes whose sample has a shadow ray (the others touch the light: always visible).
     shadow: u32,
-    /// Shadow ray origin, unit direction and end.
-    origin: Rows<3>,
-    dir: Rows<3>,
-    tfar: [f32; STEP],
+    /// Each lane's shadow ray.
+    shadow_rays: RayLanes,
     /// `|cos θ| / pdf`.
     scale: [f32; STEP],
     /// Radiance arriving from the sample (point lights: `I / r²`).
     radiance: Rows<3>,
     /// What the sample adds if visible: `f · radiance · scale` ([`Integrator::direct_total`]).
     value: Rows<3>,
+}
+
+/// A ray per lane, built in the lanes ([`rays_from_lanes`]).
+#[derive(Clone, Copy, Debug)]
+struct RayLanes([Ray; STEP]);
+
+impl Default for RayLanes {
+    fn default() -> Self {
+        Self([Ray::new(Vec3::ZERO, Vec3::X); STEP])
+    }
 }
 
 /// The rows of one step: what is read from the paths, and the continuation computed.
@@ -108,9 +117,8 @@ struct StepRows {
     reflects: u32,
     /// Lanes that scatter (in: the path goes on if its sample does; out: it does).
     scatter: u32,
-    /// The continuation's origin and unit direction.
-    origin: Rows<3>,
-    dir: Rows<3>,
+    /// Each lane's continuation ray.
+    next: RayLanes,
     /// Filled when the lanes end the step ([`finish_step`]): the paths' throughput (in: before
     /// the bounce; out: after the BSDF sample and Russian roulette), their albedo and radiance
     /// scaling, and the lanes whose path plays Russian roulette if it goes on.
@@ -121,8 +129,8 @@ struct StepRows {
 }
 
 /// A wave's entries to shade: entry `k` is ray `rays[k]` of path `owner[k]`, which found
-/// `hits[k]` at `surfaces[k]`; `alive[k]` is set when its path goes on (its continuation
-/// then replaces `rays[k]`).
+/// `hits[k]` at lane `k % STEP` of `surfaces[k / STEP]`; `alive[k]` is set when its path goes
+/// on (its continuation then replaces `rays[k]`).
 pub struct Entries<'w> {
     /// Every path of the batch.
     pub paths: &'w mut [PathState],
@@ -132,8 +140,8 @@ pub struct Entries<'w> {
     pub owner: &'w [u32],
     /// Their closest hits.
     pub hits: &'w [Hit],
-    /// The surfaces at the hits.
-    pub surfaces: &'w [SurfaceHit],
+    /// The surfaces at the hits, in rows of [`STEP`].
+    pub surfaces: &'w [SurfaceRows],
     /// Whether each entry's path goes on.
     pub alive: &'w mut [bool],
 }
@@ -147,9 +155,9 @@ impl Integrator<'_> {
             return 0;
         }
         let mut mask = 0;
+        let surfaces = &e.surfaces[k0 / STEP];
         for (j, k) in (k0..e.hits.len().min(k0 + STEP)).enumerate() {
-            let s = &e.surfaces[k];
-            let diffuse = matches!(self.scene.materials[s.material as usize].bsdf, Bsdf::Diffuse { .. });
+            let diffuse = matches!(self.scene.materials[surfaces.material[j] as usize].bsdf, Bsdf::Diffuse { .. });
             mask |= ((e.hits[k].is_hit() && diffuse) as u32) << j;
         }
         mask
@@ -176,17 +184,19 @@ impl Integrator<'_> {
         // The lanes of Sobol' paths draw their numbers together in the step; the others here.
         let mut sobol = SobolLanes::default();
         let mut sobol_lanes = 0;
+        let surfaces = &e.surfaces[k0 / STEP];
         for j in crate::simd::bits(mask) {
             let k = k0 + j;
-            let (ray, hit, s) = (&e.rays[k], &e.hits[k], &e.surfaces[k]);
+            let (ray, hit) = (&e.rays[k], &e.hits[k]);
             let path = &mut e.paths[e.owner[k] as usize];
-            let mat = &self.scene.materials[s.material as usize];
+            let mat = &self.scene.materials[surfaces.material[j] as usize];
             let Bsdf::Diffuse { albedo } = mat.bsdf else { unreachable!("lane_entries takes diffuse hits only") };
             if path.sees_emission && counted(path.depth) {
                 path.l += path.beta * self.lights.emitted(hit.prim, mat.emission, ray.dir);
             }
             // `Frame::to_local(-ray.dir).z`.
-            let wo_z = (-ray.dir).dot(s.shading_normal);
+            let ns = &surfaces.shading_normal;
+            let wo_z = (-ray.dir).dot(Vec3::new(ns[0][j], ns[1][j], ns[2][j]));
             let in_sobol = sobol.load(j, &path.rng);
             sobol_lanes |= (in_sobol as u32) << j;
             if counted(path.depth + 1) && wo_z != 0.0 {
@@ -211,12 +221,8 @@ impl Integrator<'_> {
                 (r[0][j], r[1][j], r[2][j]) = (v.x, v.y, v.z);
             }
             rows.wo_z[j] = wo_z;
-            for (r, v) in
-                [(&mut rows.p, s.position), (&mut rows.ng, s.geometric_normal), (&mut rows.ns, s.shading_normal)]
-            {
-                (r[0][j], r[1][j], r[2][j]) = (v.x, v.y, v.z);
-            }
         }
+        (rows.p, rows.ng, rows.ns) = (surfaces.position, surfaces.geometric_normal, surfaces.shading_normal);
         // With every path's numbers in the lanes, the lanes end the step too.
         let finish = sobol_lanes == mask;
         // The throughput at the points, before the lanes' Russian roulette changes it.
@@ -254,22 +260,22 @@ impl Integrator<'_> {
             let albedo = albedos[j];
             if in_rows && rows.direct >> j & 1 != 0 {
                 for (i, sample) in scratch.iter().enumerate().filter(|(_, s)| s.shadow >> j & 1 != 0) {
-                    let ray = Ray::segment(lane3(&sample.origin, j), lane3(&sample.dir, j), 0.0, sample.tfar[j]);
-                    direct.shadow.push(ray, LANE_OWNER | ((first_row + i) * STEP + j) as u32);
+                    direct.shadow.push(sample.shadow_rays.0[j], LANE_OWNER | ((first_row + i) * STEP + j) as u32);
                 }
             } else if rows.direct >> j & 1 != 0 {
                 direct.begin(id, path.beta);
                 // The frame of the lights sampled one path at a time.
                 let at = (!lights.all_lanes).then(|| {
-                    let frame = Frame::from_normal(e.surfaces[k].shading_normal);
-                    (frame, frame.to_local(-e.rays[k].dir))
+                    let s = surfaces.get(j);
+                    let frame = Frame::from_normal(s.shading_normal);
+                    (s, frame, frame.to_local(-e.rays[k].dir))
                 });
                 for (sample, &(group, in_lanes)) in scratch.iter().zip(&lights.samples) {
                     if !in_lanes {
                         let light = &self.lights.lights[group as usize];
-                        let (frame, wo) = at.as_ref().expect("a frame for the lights of other kinds");
+                        let (s, frame, wo) = at.as_ref().expect("a frame for the lights of other kinds");
                         let u = (sample.u[0][j], sample.u[1][j]);
-                        let (s, b) = (&e.surfaces[k], &Bsdf::Diffuse { albedo });
+                        let b = &Bsdf::Diffuse { albedo };
                         self.queue_light_sample(light, group, s, b, frame, *wo, u, direct);
                         continue;
                     }
@@ -277,8 +283,7 @@ impl Integrator<'_> {
                         continue;
                     }
                     let radiance = lane3(&sample.radiance, j);
-                    let shadow = (sample.shadow >> j & 1 != 0)
-                        .then(|| Ray::segment(lane3(&sample.origin, j), lane3(&sample.dir, j), 0.0, sample.tfar[j]));
+                    let shadow = (sample.shadow >> j & 1 != 0).then_some(sample.shadow_rays.0[j]);
                     let f = albedo * FRAC_1_PI;
                     direct
                         .push_light(DirectSample { f, radiance, scale: sample.scale[j], group, visible: true }, shadow);
@@ -298,7 +303,7 @@ impl Integrator<'_> {
                 rows.scatter >> j & 1 != 0 && self.continue_path(path, albedo, 1.0, false)
             };
             if alive {
-                e.rays[k] = Ray::new(lane3(&rows.origin, j), lane3(&rows.dir, j));
+                e.rays[k] = rows.next.0[j];
             }
             e.alive[k] = alive;
         }
@@ -432,7 +437,12 @@ fn finish_step<V: Lanes>(rows: &mut StepRows, sobol: &mut SobolLanes) {
 /// index of its light in `lights`) and the bounce of `rows.scatter`'s lanes; `rows.scatter`
 /// keeps the lanes whose bounce carries light. The one-path code's functions, on lanes.
 #[inline(always)]
-fn step<V: Lanes>(rows: &mut StepRows, lights: &[SampledLight], groups: &[(u32, bool)], samples: &mut [SampleLanes]) {
+fn step<V: Transpose8>(
+    rows: &mut StepRows,
+    lights: &[SampledLight],
+    groups: &[(u32, bool)],
+    samples: &mut [SampleLanes],
+) {
     debug_assert_eq!(V::LANES, STEP);
     let (p, ng, ns) = (Vec3x::<V>::load_rows(&rows.p), Vec3x::load_rows(&rows.ng), Vec3x::load_rows(&rows.ns));
     let wo_z = V::load(&rows.wo_z);
@@ -456,9 +466,7 @@ fn step<V: Lanes>(rows: &mut StepRows, lights: &[SampledLight], groups: &[(u32, 
             (Vec3x { x: f.x * r.x, y: f.y * r.y, z: f.z * r.z } * scale).store_rows(&mut s.value);
             let shadow = spawn_ray_to_lanes(p, ng, ls.point);
             s.shadow = (keep & shadow.ok).bitmask();
-            shadow.origin.store_rows(&mut s.origin);
-            shadow.dir.store_rows(&mut s.dir);
-            shadow.tfar.store(&mut s.tfar);
+            s.shadow_rays = RayLanes(rays_from_lanes(shadow.origin, shadow.dir, zero, shadow.tfar));
         }
     }
     if rows.scatter != 0 {
@@ -471,8 +479,8 @@ fn step<V: Lanes>(rows: &mut StepRows, lights: &[SampledLight], groups: &[(u32, 
         // `Frame::to_world` in the frame of `orthonormal_basis(ns)`, then `spawn_ray`.
         let (tx, ty) = orthonormal_basis_lanes(ns);
         let dir = tx * x + ty * y + ns * z;
-        offset_origin_lanes(p, toward_lanes(ng, dir)).store_rows(&mut rows.origin);
-        dir.store_rows(&mut rows.dir);
+        let origin = offset_origin_lanes(p, toward_lanes(ng, dir));
+        rows.next = RayLanes(rays_from_lanes(origin, dir, zero, V::splat(f32::INFINITY)));
     }
 }
 
@@ -575,15 +583,14 @@ mod tests {
                         }
                         assert_eq!(s.shadow >> j & 1 != 0, shadow.is_some(), "{isa:?} round {round} lane {j}");
                         if let Some(r) = shadow {
-                            assert_eq!(bits3(lane3(&s.origin, j)), bits3(r.origin), "{isa:?} round {round} lane {j}");
-                            assert_eq!(bits3(lane3(&s.dir, j)), bits3(r.dir));
-                            assert_eq!(s.tfar[j].to_bits(), r.tfar.to_bits());
+                            let got = s.shadow_rays.0[j].to_array().map(f32::to_bits);
+                            assert_eq!(got, r.to_array().map(f32::to_bits), "{isa:?} round {round} lane {j}");
                         }
                     }
                     assert_eq!(rows.scatter >> j & 1 != 0, bounce.is_some(), "{isa:?} round {round} lane {j}");
                     if let Some(r) = bounce {
-                        assert_eq!(bits3(lane3(&rows.origin, j)), bits3(r.origin), "{isa:?} round {round} lane {j}");
-                        assert_eq!(bits3(lane3(&rows.dir, j)), bits3(r.dir), "{isa:?} round {round} lane {j}");
+                        let got = rows.next.0[j].to_array().map(f32::to_bits);
+                        assert_eq!(got, r.to_array().map(f32::to_bits), "{isa:?} round {round} lane {j}");
                     }
                 }
             }
