@@ -71,12 +71,6 @@ impl Ray {
         [o.x, o.y, o.z, d.x, d.y, d.z, self.tnear, self.tfar]
     }
 
-    /// The ray of the eight floats `origin, dir, tnear, tfar` ([`Ray::to_array`]'s).
-    #[inline(always)]
-    pub fn from_array(a: [f32; 8]) -> Self {
-        Self::segment(Vec3::new(a[0], a[1], a[2]), Vec3::new(a[3], a[4], a[5]), a[6], a[7])
-    }
-
     /// Per-ray constants for slab tests: the safe reciprocal direction.
     #[inline]
     pub fn inv_dir(&self) -> Vec3 {
@@ -91,23 +85,6 @@ const _: () = assert!(std::mem::size_of::<Ray>() == 32 && std::mem::align_of::<R
 #[inline]
 pub fn transpose_rays(rays: &[Ray]) -> [[f32; 16]; 8] {
     transpose_rays_in::<crate::simd::F32x8>(rays)
-}
-
-/// Eight rays from lanes: ray `j` has lane `j` of `origin`, `dir`, `tnear` and `tfar` (the
-/// inverse of an 8-ray [`transpose_rays_in`], one transpose).
-#[inline(always)]
-pub fn rays_from_lanes<V: crate::simd::Transpose8>(
-    origin: crate::simd::Vec3x<V>,
-    dir: crate::simd::Vec3x<V>,
-    tnear: V,
-    tfar: V,
-) -> [Ray; 8] {
-    let columns = V::transpose8([origin.x, origin.y, origin.z, dir.x, dir.y, dir.z, tnear, tfar]);
-    columns.map(|c| {
-        let mut a = [0.0; 8];
-        c.store(&mut a);
-        Ray::from_array(a)
-    })
 }
 
 /// [`transpose_rays`] in the 8 lanes `V` of some ISA (the packet kernels use their own).

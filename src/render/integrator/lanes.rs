@@ -17,7 +17,7 @@
 use super::{Frame, Integrator, PathState, ROULETTE_START, throughput};
 use crate::math::Vec3;
 use crate::math::orthonormal_basis_lanes;
-use crate::ray::{Hit, Ray, rays_from_lanes};
+use crate::ray::{Hit, Ray};
 use crate::render::light::SampledLight;
 use crate::render::queue::{DirectQueue, DirectSample, LANE_OWNER, LanePoints, LaneSample, Rows};
 use crate::render::sampler::SobolLanes;
@@ -26,7 +26,7 @@ use crate::render::spawn::{offset_origin_lanes, spawn_ray_to_lanes, toward_lanes
 use crate::scene::Bsdf;
 use crate::scene::surface::SurfaceRows;
 use crate::simd::isa::{IsaOp, dispatch};
-use crate::simd::{IsaLanes, Lanes, Transpose8, Vec3x};
+use crate::simd::{IsaLanes, Lanes, Vec3x};
 use std::f32::consts::FRAC_1_PI;
 
 /// Paths per step.
@@ -80,24 +80,16 @@ pub struct SampleLanes {
     keep: u32,
     /// Lanes whose sample has a shadow ray (the others touch the light: always visible).
     shadow: u32,
-    /// Each lane's shadow ray.
-    shadow_rays: RayLanes,
+    /// Shadow ray origin, unit direction and end.
+    origin: Rows<3>,
+    dir: Rows<3>,
+    tfar: [f32; STEP],
     /// `|cos θ| / pdf`.
     scale: [f32; STEP],
     /// Radiance arriving from the sample (point lights: `I / r²`).
     radiance: Rows<3>,
     /// What the sample adds if visible: `f · radiance · scale` ([`Integrator::direct_total`]).
     value: Rows<3>,
-}
-
-/// A ray per lane, built in the lanes ([`rays_from_lanes`]).
-#[derive(Clone, Copy, Debug)]
-struct RayLanes([Ray; STEP]);
-
-impl Default for RayLanes {
-    fn default() -> Self {
-        Self([Ray::new(Vec3::ZERO, Vec3::X); STEP])
-    }
 }
 
 /// The rows of one step: what is read from the paths, and the continuation computed.
@@ -117,8 +109,9 @@ struct StepRows {
     reflects: u32,
     /// Lanes that scatter (in: the path goes on if its sample does; out: it does).
     scatter: u32,
-    /// Each lane's continuation ray.
-    next: RayLanes,
+    /// The continuation's origin and unit direction.
+    origin: Rows<3>,
+    dir: Rows<3>,
     /// Filled when the lanes end the step ([`finish_step`]): the paths' throughput (in: before
     /// the bounce; out: after the BSDF sample and Russian roulette), their albedo and radiance
     /// scaling, and the lanes whose path plays Russian roulette if it goes on.
@@ -260,7 +253,8 @@ impl Integrator<'_> {
             let albedo = albedos[j];
             if in_rows && rows.direct >> j & 1 != 0 {
                 for (i, sample) in scratch.iter().enumerate().filter(|(_, s)| s.shadow >> j & 1 != 0) {
-                    direct.shadow.push(sample.shadow_rays.0[j], LANE_OWNER | ((first_row + i) * STEP + j) as u32);
+                    let ray = Ray::segment(lane3(&sample.origin, j), lane3(&sample.dir, j), 0.0, sample.tfar[j]);
+                    direct.shadow.push(ray, LANE_OWNER | ((first_row + i) * STEP + j) as u32);
                 }
             } else if rows.direct >> j & 1 != 0 {
                 direct.begin(id, path.beta);
@@ -283,7 +277,8 @@ impl Integrator<'_> {
                         continue;
                     }
                     let radiance = lane3(&sample.radiance, j);
-                    let shadow = (sample.shadow >> j & 1 != 0).then_some(sample.shadow_rays.0[j]);
+                    let shadow = (sample.shadow >> j & 1 != 0)
+                        .then(|| Ray::segment(lane3(&sample.origin, j), lane3(&sample.dir, j), 0.0, sample.tfar[j]));
                     let f = albedo * FRAC_1_PI;
                     direct
                         .push_light(DirectSample { f, radiance, scale: sample.scale[j], group, visible: true }, shadow);
@@ -303,7 +298,7 @@ impl Integrator<'_> {
                 rows.scatter >> j & 1 != 0 && self.continue_path(path, albedo, 1.0, false)
             };
             if alive {
-                e.rays[k] = rows.next.0[j];
+                e.rays[k] = Ray::new(lane3(&rows.origin, j), lane3(&rows.dir, j));
             }
             e.alive[k] = alive;
         }
@@ -437,12 +432,7 @@ fn finish_step<V: Lanes>(rows: &mut StepRows, sobol: &mut SobolLanes) {
 /// index of its light in `lights`) and the bounce of `rows.scatter`'s lanes; `rows.scatter`
 /// keeps the lanes whose bounce carries light. The one-path code's functions, on lanes.
 #[inline(always)]
-fn step<V: Transpose8>(
-    rows: &mut StepRows,
-    lights: &[SampledLight],
-    groups: &[(u32, bool)],
-    samples: &mut [SampleLanes],
-) {
+fn step<V: Lanes>(rows: &mut StepRows, lights: &[SampledLight], groups: &[(u32, bool)], samples: &mut [SampleLanes]) {
     debug_assert_eq!(V::LANES, STEP);
     let (p, ng, ns) = (Vec3x::<V>::load_rows(&rows.p), Vec3x::load_rows(&rows.ng), Vec3x::load_rows(&rows.ns));
     let wo_z = V::load(&rows.wo_z);
@@ -466,7 +456,9 @@ fn step<V: Transpose8>(
             (Vec3x { x: f.x * r.x, y: f.y * r.y, z: f.z * r.z } * scale).store_rows(&mut s.value);
             let shadow = spawn_ray_to_lanes(p, ng, ls.point);
             s.shadow = (keep & shadow.ok).bitmask();
-            s.shadow_rays = RayLanes(rays_from_lanes(shadow.origin, shadow.dir, zero, shadow.tfar));
+            shadow.origin.store_rows(&mut s.origin);
+            shadow.dir.store_rows(&mut s.dir);
+            shadow.tfar.store(&mut s.tfar);
         }
     }
     if rows.scatter != 0 {
@@ -479,8 +471,8 @@ fn step<V: Transpose8>(
         // `Frame::to_world` in the frame of `orthonormal_basis(ns)`, then `spawn_ray`.
         let (tx, ty) = orthonormal_basis_lanes(ns);
         let dir = tx * x + ty * y + ns * z;
-        let origin = offset_origin_lanes(p, toward_lanes(ng, dir));
-        rows.next = RayLanes(rays_from_lanes(origin, dir, zero, V::splat(f32::INFINITY)));
+        offset_origin_lanes(p, toward_lanes(ng, dir)).store_rows(&mut rows.origin);
+        dir.store_rows(&mut rows.dir);
     }
 }
 
@@ -583,14 +575,15 @@ mod tests {
                         }
                         assert_eq!(s.shadow >> j & 1 != 0, shadow.is_some(), "{isa:?} round {round} lane {j}");
                         if let Some(r) = shadow {
-                            let got = s.shadow_rays.0[j].to_array().map(f32::to_bits);
-                            assert_eq!(got, r.to_array().map(f32::to_bits), "{isa:?} round {round} lane {j}");
+                            assert_eq!(bits3(lane3(&s.origin, j)), bits3(r.origin), "{isa:?} round {round} lane {j}");
+                            assert_eq!(bits3(lane3(&s.dir, j)), bits3(r.dir));
+                            assert_eq!(s.tfar[j].to_bits(), r.tfar.to_bits());
                         }
                     }
                     assert_eq!(rows.scatter >> j & 1 != 0, bounce.is_some(), "{isa:?} round {round} lane {j}");
                     if let Some(r) = bounce {
-                        let got = rows.next.0[j].to_array().map(f32::to_bits);
-                        assert_eq!(got, r.to_array().map(f32::to_bits), "{isa:?} round {round} lane {j}");
+                        assert_eq!(bits3(lane3(&rows.origin, j)), bits3(r.origin), "{isa:?} round {round} lane {j}");
+                        assert_eq!(bits3(lane3(&rows.dir, j)), bits3(r.dir), "{isa:?} round {round} lane {j}");
                     }
                 }
             }
