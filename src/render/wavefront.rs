@@ -14,7 +14,8 @@
 //!    results bit for bit);
 //! 4. *trace* the shadow rays of the whole batch as one occlusion stream (and the hemisphere
 //!    rays as one closest-hit stream), add each point's direct lighting
-//!    ([`Integrator::direct_total`]);
+//!    ([`Integrator::direct_total`]; for the points shaded in lanes, eight at a time in lanes:
+//!    [`Integrator::add_direct_lanes`]);
 //! 5. *compact* the surviving paths' rays, optionally *sort* them ([`RayOrder`]), trace them as
 //!    one closest-hit stream and go back to 3 until no path is left.
 //!
@@ -433,7 +434,12 @@ pub fn worker_bytes(paths: usize, direct: usize) -> u64 {
         + size_of::<bool>()
         + size_of::<SurfaceRows>() / STEP
         + size_of::<super::queue::DirectPoint>();
-    let per_sample = size_of::<super::queue::DirectSample>() + ray + size_of::<bool>();
+    let per_wave = per_wave + size_of::<super::queue::LanePoints>() / STEP;
+    // Samples one by one or in rows (a row for eight samples).
+    let per_sample = size_of::<super::queue::DirectSample>()
+        + size_of::<super::queue::LaneSample>() / STEP
+        + ray
+        + size_of::<bool>();
     let sort = SortScratch::bytes_per_ray() * samples.max(wave);
     (paths * per_path + wave * per_wave + samples * per_sample + sort) as u64
 }

@@ -8,11 +8,14 @@
 //! them). Every path's radiance, random numbers, direct samples and rays are therefore
 //! bit-identical to shading it alone (unit test on every ISA, and the same images).
 //!
-//! What stays one path at a time: reading its state and surface into rows, its emission,
-//! drawing its random numbers (each path has its own generator, drawn in the order of the
-//! one-path code: light samples, BSDF sample, roulette), and queueing its direct samples and
+//! What stays one path at a time: reading its state into rows, its emission, drawing its
+//! random numbers when they are not Sobol' (each path has its own generator, drawn in the order
+//! of the one-path code: light samples, BSDF sample, roulette), and queueing its shadow rays and
 //! continuation ray. The lanes compute the shading frame, the light samples and their shadow
-//! rays, the cosine-weighted bounce direction and the continuation's origin.
+//! rays, the cosine-weighted bounce direction and the continuation's origin. The surfaces come
+//! in rows ([`SurfaceRows`]); when every light is sampled in the lanes, the step's direct
+//! samples stay in rows too ([`LanePoints`], [`LaneSample`]) and their sum is taken in lanes
+//! after the shadow rays are traced ([`Integrator::add_direct_lanes`]).
 
 use super::{Frame, Integrator, PathState, ROULETTE_START, throughput};
 use crate::math::Vec3;
