@@ -255,8 +255,7 @@ impl<'a> Integrator<'a> {
     /// Prepares the integrator (and the scene's lights for sampling).
     pub fn new(scene: &'a Scene, settings: &'a RenderSettings) -> Self {
         let lights = LightSet::new(scene);
-        let per_light = |l: &SampledLight| if l.is_delta() { 1 } else { settings.light_samples.max(1) };
-        let hemisphere_samples = lights.lights.iter().map(per_light).sum();
+        let hemisphere_samples = lights.lights.iter().map(|l| l.samples_per_point(settings.light_samples)).sum();
         let bounces = settings.integrator.bounces(settings.max_depth);
         let lane_lights = match bounces {
             Some(_) if !settings.hemisphere_sampling => Some(LaneLights::new(&lights.lights, settings.light_samples)),
@@ -446,8 +445,7 @@ impl<'a> Integrator<'a> {
     #[inline]
     fn group_samples(&self, group: u32) -> u32 {
         match self.lights.lights.get(group as usize) {
-            Some(l) if l.is_delta() => 1,
-            Some(_) => self.settings.light_samples.max(1),
+            Some(l) => l.samples_per_point(self.settings.light_samples),
             None => self.hemisphere_samples,
         }
     }
@@ -473,8 +471,7 @@ impl<'a> Integrator<'a> {
         out: &mut DirectQueue,
     ) {
         for (group, light) in self.lights.lights.iter().enumerate() {
-            let n = if light.is_delta() { 1 } else { self.settings.light_samples.max(1) };
-            for _ in 0..n {
+            for _ in 0..light.samples_per_point(self.settings.light_samples) {
                 self.queue_light_sample(light, group as u32, s, b, frame, wo, rng.next_2d(), out);
             }
         }

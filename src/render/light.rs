@@ -143,6 +143,13 @@ impl SampledLight {
         matches!(self, SampledLight::Point { .. } | SampledLight::Spot { .. } | SampledLight::Directional { .. })
     }
 
+    /// Samples of the light per shading point when each area light takes `per_area` (at least
+    /// one): one for a delta light, whose every sample is the same.
+    #[inline]
+    pub fn samples_per_point(&self, per_area: u32) -> u32 {
+        if self.is_delta() { 1 } else { per_area.max(1) }
+    }
+
     /// True for the kinds [`SampledLight::sample_lanes`] samples (rectangles and points).
     pub fn in_lanes(&self) -> bool {
         matches!(self, SampledLight::Rect { .. } | SampledLight::Point { .. })

@@ -54,7 +54,7 @@ impl LaneLights {
     pub(super) fn new(lights: &[SampledLight], per_area: u32) -> Self {
         let (mut samples, mut divisors) = (Vec::new(), Vec::new());
         for (group, light) in lights.iter().enumerate() {
-            let n = if light.is_delta() { 1 } else { per_area.max(1) };
+            let n = light.samples_per_point(per_area);
             samples.extend(std::iter::repeat_n((group as u32, light.in_lanes()), n as usize));
             divisors.extend(std::iter::repeat_n(n as f32, n as usize));
         }
