@@ -211,16 +211,18 @@ impl DirectQueue {
     /// The sample rows of lane step `i`.
     #[inline]
     pub fn lane_samples_of(&self, i: usize) -> &[LaneSample] {
-        let start = self.lanes[i].start as usize;
-        let end = self.lanes.get(i + 1).map_or(self.lane_samples.len(), |p| p.start as usize);
-        &self.lane_samples[start..end]
+        group(&self.lane_samples, self.lanes[i].start, self.lanes.get(i + 1).map(|p| p.start))
     }
 
     /// The samples of point `i`.
     #[inline]
     pub fn samples_of(&self, i: usize) -> &[DirectSample] {
-        let start = self.points[i].start as usize;
-        let end = self.points.get(i + 1).map_or(self.samples.len(), |p| p.start as usize);
-        &self.samples[start..end]
+        group(&self.samples, self.points[i].start, self.points.get(i + 1).map(|p| p.start))
     }
+}
+
+/// The group of `items` from `start` to the next group's start (`None`: the end).
+#[inline]
+fn group<T>(items: &[T], start: u32, next: Option<u32>) -> &[T] {
+    &items[start as usize..next.map_or(items.len(), |n| n as usize)]
 }

@@ -90,6 +90,9 @@ impl Scene {
     }
 }
 
+/// Every lane of a step.
+const ALL: u32 = (1 << STEP) - 1;
+
 /// Where [`Surfaces`] puts each step's rows.
 trait Sink {
     /// The rows of step `k`, to be filled.
@@ -152,7 +155,10 @@ impl<S: Sink> IsaOp for Surfaces<'_, S> {
                 hit |= (h.is_hit() as u32) << j;
             }
             let rows = sink.rows(k);
-            *rows = SurfaceRows::MISSES;
+            if triangles != ALL {
+                // Lanes the triangle kernel leaves as they are.
+                *rows = SurfaceRows::MISSES;
+            }
             if triangles != 0 {
                 triangle_surfaces::<I::F8>(&scene.triangles, &step, triangles, rows);
             }
@@ -200,7 +206,7 @@ fn triangle_surfaces<V: Lanes>(tris: &TrianglesSoa, hits: &[Hit; STEP], triangle
         let i = Vec3x::select(i.dot(ng).lt(V::splat(0.0)), -i, i);
         ns = Vec3x::select(i_ok, i, ng);
     }
-    if triangles == (1 << STEP) - 1 {
+    if triangles == ALL {
         position.store_rows(&mut out.position);
         ng.store_rows(&mut out.geometric_normal);
         ns.store_rows(&mut out.shading_normal);
