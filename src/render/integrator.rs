@@ -33,8 +33,11 @@ use crate::ray::{Hit, Ray};
 use crate::scene::{Bsdf, Material, Scene, SurfaceHit};
 use crate::simd::{F32x1, Lanes, Vec3x};
 
+mod lane_direct;
+mod lane_step;
 mod lanes;
-pub use lanes::{Entries, LaneLights, STEP, SampleLanes};
+pub use lane_step::SampleLanes;
+pub use lanes::{Entries, LaneLights, STEP};
 
 /// The quantity a render computes per camera ray.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]

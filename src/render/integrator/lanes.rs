@@ -1,7 +1,7 @@
 //! Shading eight paths at a time: [`Integrator::shade`] and [`Integrator::scatter`] for the
 //! common case, a diffuse surface under light sampling, with the arithmetic in SIMD lanes on
 //! the scene's ISA (dispatched as the tracing kernels are). The lanes call the one-path code's
-//! own functions, written once over [`Lanes`] (the one-path code runs them on one lane,
+//! own functions, written once over [`crate::simd::Lanes`] (the one-path code runs them on one lane,
 //! [`crate::simd::F32x1`]): `concentric_disk_lanes`, `orthonormal_basis_lanes`, `toward_lanes`,
 //! `offset_origin_lanes`, `spawn_ray_to_lanes` and [`SampledLight::sample_lanes`] (rectangle
 //! and point lights; other kinds are sampled one path at a time with the uniforms drawn for
@@ -17,19 +17,21 @@
 //! samples stay in rows too ([`LanePoints`], [`LaneSample`]) and their sum is taken in lanes
 //! after the shadow rays are traced ([`Integrator::add_direct_lanes`]).
 
-use super::{Frame, Integrator, PathState, ROULETTE_START, throughput};
+//!
+//! The pieces: this module reads and writes the paths around a step; `lane_step` is the
+//! step's arithmetic on one ISA; `lane_direct` adds the rows of direct samples up after the
+//! shadow rays are traced.
+
+use super::lane_step::{SampleLanes, Step, StepRows};
+use super::{Frame, Integrator, PathState, ROULETTE_START};
 use crate::math::Vec3;
-use crate::math::orthonormal_basis_lanes;
 use crate::ray::{Hit, Ray};
 use crate::render::light::SampledLight;
 use crate::render::queue::{DirectQueue, DirectSample, LANE_OWNER, LanePoints, LaneSample, Rows};
 use crate::render::sampler::SobolLanes;
-use crate::render::sampling::concentric_disk_lanes;
-use crate::render::spawn::{offset_origin_lanes, spawn_ray_to_lanes, toward_lanes};
 use crate::scene::Bsdf;
 use crate::scene::surface::SurfaceRows;
-use crate::simd::isa::{IsaOp, dispatch};
-use crate::simd::{IsaLanes, Lanes, Vec3x};
+use crate::simd::isa::dispatch;
 use std::f32::consts::FRAC_1_PI;
 
 /// Paths per step.
@@ -42,11 +44,11 @@ pub use crate::render::queue::STEP;
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct LaneLights {
     /// Each sample's light (its group), and whether the lanes sample it.
-    samples: Vec<(u32, bool)>,
+    pub(super) samples: Vec<(u32, bool)>,
     /// Each sample's group's samples per point ([`Integrator::direct_total`]'s divisor).
-    divisors: Vec<f32>,
+    pub(super) divisors: Vec<f32>,
     /// True when every sample is taken in the lanes.
-    all_lanes: bool,
+    pub(super) all_lanes: bool,
 }
 
 impl LaneLights {
@@ -71,57 +73,6 @@ impl LaneLights {
     pub fn is_empty(&self) -> bool {
         self.samples.is_empty()
     }
-}
-
-/// One direct-lighting sample of a step's eight points: its uniforms, and what the lanes
-/// made of them.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct SampleLanes {
-    /// The two uniforms of each lane.
-    u: Rows<2>,
-    /// Lanes whose sample is queued (it carries light).
-    keep: u32,
-    /// Lanes whose sample has a shadow ray (the others touch the light: always visible).
-    shadow: u32,
-    /// Shadow ray origin, unit direction and end.
-    origin: Rows<3>,
-    dir: Rows<3>,
-    tfar: [f32; STEP],
-    /// `|cos θ| / pdf`.
-    scale: [f32; STEP],
-    /// Radiance arriving from the sample (point lights: `I / r²`).
-    radiance: Rows<3>,
-    /// What the sample adds if visible: `f · radiance · scale` ([`Integrator::direct_total`]).
-    value: Rows<3>,
-}
-
-/// The rows of one step: what is read from the paths, and the continuation computed.
-#[derive(Clone, Copy, Debug, Default)]
-struct StepRows {
-    /// Hit point, geometric normal, shading normal.
-    p: Rows<3>,
-    ng: Rows<3>,
-    ns: Rows<3>,
-    /// `z` of the direction back along the incoming ray, in the shading frame.
-    wo_z: [f32; STEP],
-    /// Uniforms of the BSDF sample.
-    u: Rows<2>,
-    /// Lanes that gather direct lighting.
-    direct: u32,
-    /// Lanes whose BSDF is not black (`albedo / π != 0`).
-    reflects: u32,
-    /// Lanes that scatter (in: the path goes on if its sample does; out: it does).
-    scatter: u32,
-    /// The continuation's origin and unit direction.
-    origin: Rows<3>,
-    dir: Rows<3>,
-    /// Filled when the lanes end the step ([`finish_step`]): the paths' throughput (in: before
-    /// the bounce; out: after the BSDF sample and Russian roulette), their albedo and radiance
-    /// scaling, and the lanes whose path plays Russian roulette if it goes on.
-    beta: Rows<3>,
-    albedo: Rows<3>,
-    eta_scale: [f32; STEP],
-    roulette: u32,
 }
 
 /// A wave's entries to shade: entry `k` is ray `rays[k]` of path `owner[k]`, which found
@@ -308,290 +259,10 @@ impl Integrator<'_> {
     }
 }
 
-impl Integrator<'_> {
-    /// Adds the direct lighting of the lane points of `d` (their shadow rays traced) to their
-    /// paths: per lane, [`Integrator::direct_total`] of its samples times its weight, the same
-    /// sums bit for bit.
-    pub fn add_direct_lanes(&self, d: &DirectQueue, paths: &mut [PathState]) {
-        let Some(lights) = &self.lane_lights else { return };
-        if d.lanes.is_empty() {
-            return;
-        }
-        dispatch(self.scene.isa(), DirectLanes { d, paths, groups: &lights.samples, divisors: &lights.divisors });
-    }
-}
-
-/// Direct lighting added in lanes, run on one ISA.
-struct DirectLanes<'a> {
-    d: &'a DirectQueue,
-    paths: &'a mut [PathState],
-    /// Each sample row's light (its group) and that group's samples per point.
-    groups: &'a [(u32, bool)],
-    divisors: &'a [f32],
-}
-
-impl IsaOp for DirectLanes<'_> {
-    type Output = ();
-    #[inline(always)]
-    fn run<I: IsaLanes>(self) {
-        for (i, points) in self.d.lanes.iter().enumerate() {
-            let add = direct_lanes::<I::F8>(points, self.d.lane_samples_of(i), self.groups, self.divisors);
-            for j in crate::simd::bits(points.mask) {
-                self.paths[points.path[j] as usize].l += add.lane(j);
-            }
-        }
-    }
-}
-
-/// `weight · direct_total(samples)` of each lane of `points`: each group's visible values
-/// summed in draw order and divided by its divisor, where the lane queued any sample of it.
-#[inline(always)]
-fn direct_lanes<V: Lanes>(
-    points: &LanePoints,
-    rows: &[LaneSample],
-    groups: &[(u32, bool)],
-    divisors: &[f32],
-) -> Vec3x<V> {
-    let zero = Vec3x::<V>::splat(Vec3::ZERO);
-    let mut total = zero;
-    let mut i = 0;
-    while i < rows.len() {
-        let group = groups[i].0;
-        let (mut sum, mut queued) = (zero, 0);
-        let divisor = V::splat(divisors[i]);
-        while i < rows.len() && groups[i].0 == group {
-            let r = &rows[i];
-            sum = Vec3x::select(V::from_bitmask(r.visible), sum + Vec3x::load_rows(&r.value), sum);
-            queued |= r.kept;
-            i += 1;
-        }
-        total = Vec3x::select(V::from_bitmask(queued), total + sum / divisor, total);
-    }
-    let w = Vec3x::<V>::load_rows(&points.weight);
-    Vec3x { x: w.x * total.x, y: w.y * total.y, z: w.z * total.z }
-}
-
-/// The lanes' part of a step, run on one ISA.
-struct Step<'a> {
-    rows: &'a mut StepRows,
-    /// The integrator's lights, and each sample's light (and whether the lanes sample it).
-    lights: &'a [SampledLight],
-    groups: &'a [(u32, bool)],
-    samples: &'a mut [SampleLanes],
-    /// The lanes (bits of `sobol_lanes`) whose uniforms `sobol` draws here, in the one-path
-    /// order: each light sample, the BSDF sample, the unused lobe choice.
-    sobol: &'a mut SobolLanes,
-    sobol_lanes: u32,
-    /// Whether the lanes end the step ([`finish_step`]; every lane's numbers are in `sobol`).
-    finish: bool,
-}
-
-impl IsaOp for Step<'_> {
-    type Output = ();
-    #[inline(always)]
-    fn run<I: IsaLanes>(self) {
-        if self.sobol_lanes != 0 {
-            let direct = self.rows.direct & self.sobol_lanes;
-            if direct != 0 {
-                for s in self.samples.iter_mut() {
-                    self.sobol.next_2d(direct, &mut s.u);
-                }
-            }
-            let scatter = self.rows.scatter & self.sobol_lanes;
-            self.sobol.next_2d(scatter, &mut self.rows.u);
-            self.sobol.skip(scatter);
-        }
-        step::<I::F8>(self.rows, self.lights, self.groups, self.samples);
-        if self.finish {
-            finish_step::<I::F8>(self.rows, self.sobol);
-        }
-    }
-}
-
-/// `Integrator::continue_path` of the lanes of `rows.scatter` (weight `albedo`, radiance
-/// scaling 1, not delta; [`throughput`]), the roulette's uniforms drawn by `sobol`:
-/// `rows.beta` becomes the throughput after it and `rows.scatter` keeps the lanes that go on.
-#[inline(always)]
-fn finish_step<V: Lanes>(rows: &mut StepRows, sobol: &mut SobolLanes) {
-    let r = throughput(
-        Vec3x::<V>::load_rows(&rows.beta),
-        Vec3x::load_rows(&rows.albedo),
-        // `eta_scale * 1.0` is `eta_scale`.
-        V::load(&rows.eta_scale),
-        V::from_bitmask(rows.scatter),
-        V::from_bitmask(rows.roulette),
-    );
-    let mut u = [0.0f32; STEP];
-    let draws = r.draws.bitmask();
-    if draws != 0 {
-        sobol.next_1d(draws, &mut u);
-    }
-    let (beta, goes) = r.end(V::load(&u));
-    beta.store_rows(&mut rows.beta);
-    rows.scatter = goes.bitmask();
-}
-
-/// The light samples of `rows.direct`'s lanes (into `samples`, one per entry of `groups`, the
-/// index of its light in `lights`) and the bounce of `rows.scatter`'s lanes; `rows.scatter`
-/// keeps the lanes whose bounce carries light. The one-path code's functions, on lanes.
-#[inline(always)]
-fn step<V: Lanes>(rows: &mut StepRows, lights: &[SampledLight], groups: &[(u32, bool)], samples: &mut [SampleLanes]) {
-    debug_assert_eq!(V::LANES, STEP);
-    let (p, ng, ns) = (Vec3x::<V>::load_rows(&rows.p), Vec3x::load_rows(&rows.ng), Vec3x::load_rows(&rows.ns));
-    let wo_z = V::load(&rows.wo_z);
-    let (zero, one) = (V::splat(0.0), V::splat(1.0));
-    if rows.direct != 0 {
-        let gathers = V::from_bitmask(rows.direct) & V::from_bitmask(rows.reflects);
-        // `bsdf::f` of a diffuse BSDF.
-        let f = Vec3x::<V>::load_rows(&rows.albedo) * V::splat(FRAC_1_PI);
-        for (&(group, _), s) in groups.iter().zip(samples.iter_mut()) {
-            let (u0, u1) = (V::load(&s.u[0]), V::load(&s.u[1]));
-            let Some(ls) = lights[group as usize].sample_lanes(p, u0, u1) else { continue };
-            // `Frame::to_local(wi).z`, `bsdf::f` not zero, and a positive density.
-            let wi_z = ls.wi.dot(ns);
-            let keep = ls.carries & gathers & (wo_z * wi_z).gt(zero) & ls.pdf.gt(zero);
-            s.keep = keep.bitmask();
-            let scale = wi_z.abs() / ls.pdf;
-            scale.store(&mut s.scale);
-            ls.radiance.store_rows(&mut s.radiance);
-            // `DirectSample`'s `f · radiance · scale`, in its order.
-            let r = ls.radiance;
-            (Vec3x { x: f.x * r.x, y: f.y * r.y, z: f.z * r.z } * scale).store_rows(&mut s.value);
-            let shadow = spawn_ray_to_lanes(p, ng, ls.point);
-            s.shadow = (keep & shadow.ok).bitmask();
-            shadow.origin.store_rows(&mut s.origin);
-            shadow.dir.store_rows(&mut s.dir);
-            shadow.tfar.store(&mut s.tfar);
-        }
-    }
-    if rows.scatter != 0 {
-        // `bsdf::sample_f` of a diffuse BSDF: `cosine_hemisphere`, then the side of `wo`.
-        let (x, y) = concentric_disk_lanes(V::load(&rows.u[0]), V::load(&rows.u[1]));
-        let z = (one - x * x - y * y).vmax(zero).sqrt();
-        let goes = V::from_bitmask(rows.scatter) & !wo_z.eq(zero) & !z.eq(zero);
-        rows.scatter = goes.bitmask();
-        let z = z.copysign(wo_z);
-        // `Frame::to_world` in the frame of `orthonormal_basis(ns)`, then `spawn_ray`.
-        let (tx, ty) = orthonormal_basis_lanes(ns);
-        let dir = tx * x + ty * y + ns * z;
-        offset_origin_lanes(p, toward_lanes(ng, dir)).store_rows(&mut rows.origin);
-        dir.store_rows(&mut rows.dir);
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::render::sampler::Rng;
-    use crate::render::sampling::cosine_hemisphere;
-    use crate::render::spawn::{spawn_ray, spawn_ray_to};
-
-    fn bits3(v: Vec3) -> [u32; 3] {
-        v.to_array().map(f32::to_bits)
-    }
-
-    /// The lanes' pieces against the one-path functions, bit for bit, on random points,
-    /// normals and uniforms, on every ISA.
-    #[test]
-    fn lanes_equal_the_one_path_functions_on_every_isa() {
-        let mut rng = Rng::new(11, 5);
-        let r3 = |rng: &mut Rng, s: f32| {
-            let mut v = || (rng.next_f32() - 0.5) * s;
-            Vec3::new(v(), v(), v())
-        };
-        let sampled = [
-            SampledLight::Rect {
-                radiance: Vec3::new(5.0, 4.0, 3.0),
-                center: Vec3::new(0.0, 1.9, 0.0),
-                normal: Vec3::NEG_Y,
-                dim_x: Vec3::new(0.5, 0.0, 0.0),
-                dim_y: Vec3::new(0.0, 0.0, 0.4),
-                area: 0.2,
-            },
-            SampledLight::Point { position: Vec3::new(0.3, 1.2, -0.4), intensity: Vec3::new(2.0, 1.0, 0.5) },
-        ];
-        let scene = crate::scene::SceneBuilder::new().commit(&crate::BuildOptions::default()).0;
-        for isa in crate::Isa::available() {
-            for round in 0..200 {
-                let mut rows = StepRows { direct: 0xFF, scatter: 0xFF, reflects: 0xFF, ..Default::default() };
-                let mut samples = [SampleLanes::default(); 2];
-                let mut want = Vec::new();
-                for j in 0..STEP {
-                    // Points near and far from the origin (both branches of the offset), some on the light.
-                    let scale = [0.01, 1.0, 3.0, 1e4][(round + j) % 4];
-                    let p = if round % 17 == 3 && j == 2 { Vec3::new(0.0, 1.9, 0.0) } else { r3(&mut rng, scale) };
-                    let ng = r3(&mut rng, 2.0).normalize();
-                    let ns = if j % 3 == 0 { ng } else { (ng + r3(&mut rng, 0.6)).normalize() };
-                    let dir = r3(&mut rng, 2.0).normalize();
-                    let wo_z = (-dir).dot(ns);
-                    for c in 0..3 {
-                        (rows.p[c][j], rows.ng[c][j], rows.ns[c][j]) = (p[c], ng[c], ns[c]);
-                    }
-                    rows.wo_z[j] = wo_z;
-                    let frame = crate::render::frame::Frame::from_normal(ns);
-                    assert_eq!(frame.to_local(-dir).z.to_bits(), wo_z.to_bits());
-                    let ub = (rng.next_f32(), rng.next_f32());
-                    (rows.u[0][j], rows.u[1][j]) = ub;
-                    let mut per_light = Vec::new();
-                    for (i, light) in sampled.iter().enumerate() {
-                        let u = (rng.next_f32(), rng.next_f32());
-                        (samples[i].u[0][j], samples[i].u[1][j]) = u;
-                        let ctx = crate::render::light::LightContext { p, n: ns };
-                        per_light.push(light.sample(&scene, &ctx, u).and_then(|ls| {
-                            let wi_z = frame.to_local(ls.wi).z;
-                            (wo_z * wi_z > 0.0 && ls.pdf > 0.0).then(|| {
-                                let shadow = spawn_ray_to(p, ng, ls.point.expect("a point"));
-                                (wi_z.abs() / ls.pdf, ls.radiance, shadow)
-                            })
-                        }));
-                    }
-                    let bounce = (wo_z != 0.0)
-                        .then(|| {
-                            let mut wi = cosine_hemisphere(ub);
-                            (wi.z != 0.0).then(|| {
-                                wi.z = wi.z.copysign(wo_z);
-                                spawn_ray(p, ng, frame.to_world(wi))
-                            })
-                        })
-                        .flatten();
-                    want.push((per_light, bounce));
-                }
-                let step = Step {
-                    rows: &mut rows,
-                    lights: &sampled,
-                    groups: &[(0, true), (1, true)],
-                    samples: &mut samples,
-                    sobol: &mut SobolLanes::default(),
-                    sobol_lanes: 0,
-                    finish: false,
-                };
-                dispatch(isa, step);
-                let lane3 = |r: &Rows<3>, j: usize| Vec3::new(r[0][j], r[1][j], r[2][j]);
-                for (j, (per_light, bounce)) in want.iter().enumerate() {
-                    for (i, w) in per_light.iter().enumerate() {
-                        let s = &samples[i];
-                        assert_eq!(s.keep >> j & 1 != 0, w.is_some(), "{isa:?} round {round} lane {j} light {i}");
-                        let Some((scale, radiance, shadow)) = w else { continue };
-                        assert_eq!(s.scale[j].to_bits(), scale.to_bits(), "{isa:?} round {round} lane {j}");
-                        if matches!(sampled[i], SampledLight::Point { .. }) {
-                            assert_eq!(bits3(lane3(&s.radiance, j)), bits3(*radiance));
-                        }
-                        assert_eq!(s.shadow >> j & 1 != 0, shadow.is_some(), "{isa:?} round {round} lane {j}");
-                        if let Some(r) = shadow {
-                            assert_eq!(bits3(lane3(&s.origin, j)), bits3(r.origin), "{isa:?} round {round} lane {j}");
-                            assert_eq!(bits3(lane3(&s.dir, j)), bits3(r.dir));
-                            assert_eq!(s.tfar[j].to_bits(), r.tfar.to_bits());
-                        }
-                    }
-                    assert_eq!(rows.scatter >> j & 1 != 0, bounce.is_some(), "{isa:?} round {round} lane {j}");
-                    if let Some(r) = bounce {
-                        assert_eq!(bits3(lane3(&rows.origin, j)), bits3(r.origin), "{isa:?} round {round} lane {j}");
-                        assert_eq!(bits3(lane3(&rows.dir, j)), bits3(r.dir), "{isa:?} round {round} lane {j}");
-                    }
-                }
-            }
-        }
-    }
 
     /// Whole batches through the wavefront with the lanes and without (every hit one path at
     /// a time): the same radiance bit for bit, in the built-in Cornell box (diffuse walls
